@@ -1,0 +1,84 @@
+"""Frames, signs and units of cvc_balance: the one module that owns them.
+
+Frames (REP-103 / REP-105 style, right-handed, SI units):
+
+* ``stator`` frame: fixed to the machine base. Z is the spin axis; the origin O
+  is on the axis at z = 0. Gravity is given in this frame.
+* ``rotor`` frame: turns with the rotor about the common Z axis. The rotor
+  angle q (rad) is the angle from stator X to rotor X, positive about +Z.
+* A component's own frame is (radial, tangential, axial) at its angle theta:
+  x points from the axis through the component's centre of mass, y is x
+  turned by +90 deg about Z, z is the spin axis (the thesis's X_phi Y_phi Z).
+
+Signs:
+
+* Inertia tensors hold tensor elements, as URDF does: ``ixy = -int x y dm``.
+  The thesis's (and balancing practice's) products of inertia are the
+  positive integrals ``P_xy = int x y dm``; :func:`products_of_inertia`
+  converts.
+* Loads are what the rotor puts on the stator through its supports (what a
+  load cell on the stator reads), i.e. minus the support reaction on the rotor.
+* The drive torque is the torque the drive applies to the rotor about +Z.
+
+Angles are radians everywhere inside the code; degrees only at the edges
+(layout files may say ``angle_deg``; the command line prints degrees).
+"""
+
+import math
+
+import numpy as np
+
+STATOR_FRAME = 'stator'
+ROTOR_FRAME = 'rotor'
+
+STANDARD_GRAVITY = 9.80665
+"""m/s^2, the conventional value (CGPM 1901)."""
+
+DEFAULT_GRAVITY = (0.0, -STANDARD_GRAVITY, 0.0)
+"""Gravity in the stator frame, m/s^2: stator Y points up, Z is horizontal."""
+
+
+def rotation_z(angle):
+    """Rotation matrix (3x3) that turns a vector by ``angle`` (rad) about +Z."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def turn_xy(x, y, cos_a, sin_a):
+    """Turn the XY part of a vector by the angle whose cosine and sine are given.
+
+    With (cos q, sin q) this maps rotor-frame components to the stator frame;
+    with (cos q, -sin q) stator to rotor. Works on floats and on numpy arrays
+    alike (plain arithmetic, no numpy calls), so the per-message path and the
+    vectorised path share it.
+    """
+    return cos_a * x - sin_a * y, sin_a * x + cos_a * y
+
+
+def products_of_inertia(tensor):
+    """Products of inertia (P_xy, P_xz, P_yz) = (int xy dm, int xz dm, int yz dm).
+
+    ``tensor`` is a 3x3 inertia tensor (tensor elements, ixy = -int xy dm);
+    returns kg m^2.
+    """
+    return -tensor[0, 1], -tensor[0, 2], -tensor[1, 2]
+
+
+def tensor_from_elements(ixx, iyy, izz, ixy, ixz, iyz):
+    """3x3 inertia tensor from URDF-style elements (ixy = -int xy dm)."""
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], dtype=float)
+
+
+def polar(x, y):
+    """Amount and angle (rad, from X toward Y) of a planar vector."""
+    return math.hypot(x, y), math.atan2(y, x)
+
+
+def degrees(angle):
+    """Radians to degrees, for people (output edges only)."""
+    return math.degrees(angle)
+
+
+def radians(angle_deg):
+    """Degrees to radians, for people's input (layout files, command line)."""
+    return math.radians(angle_deg)

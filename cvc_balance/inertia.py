@@ -1,0 +1,144 @@
+"""Mass properties as composable values, and the inertia of the layout's shapes.
+
+A :class:`MassProperties` is mass, first mass moment and inertia tensor about
+the origin of the frame it is expressed in, like Pinocchio's ``Inertia``:
+values add (``a + b`` is the two bodies bolted together) and can be turned
+about Z. :func:`place` puts a body given about its own centre of mass, in its
+own (radial, tangential, axial) frame, at the cylindrical vector components
+(R, theta, z) of the rotor frame, by the thesis's CVC parallel-axis theorem
+(Eq. 3.7, with its last line corrected: NOTES.md erratum 5).
+
+Units: kg, m, kg m, kg m^2. Tensors hold tensor elements (see
+:mod:`cvc_balance.frames`). numpy only.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cvc_balance.frames import rotation_z, tensor_from_elements
+
+SHAPE_AXES = ('radial', 'tangential', 'axial')
+"""Directions a shape's symmetry axis can take, own-frame x, y, z."""
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Mass, first moment and inertia tensor about the frame origin O.
+
+    ``first_moment`` is int r dm (kg m, shape (3,)); ``inertia`` the 3x3
+    tensor about O (kg m^2, tensor elements).
+    """
+
+    mass: float
+    first_moment: np.ndarray
+    inertia: np.ndarray
+
+    @classmethod
+    def zero(cls):
+        """The empty body."""
+        return cls(0.0, np.zeros(3), np.zeros((3, 3)))
+
+    def __add__(self, other):
+        """Two bodies rigidly joined, both expressed in the same frame."""
+        return MassProperties(self.mass + other.mass,
+                              self.first_moment + other.first_moment,
+                              self.inertia + other.inertia)
+
+    @property
+    def com(self):
+        """Centre of mass, m (undefined for zero mass)."""
+        return self.first_moment / self.mass
+
+    def inertia_about_com(self):
+        """Inertia tensor about the centre of mass, same axes (kg m^2)."""
+        c = self.com
+        return self.inertia - self.mass * (c @ c * np.eye(3) - np.outer(c, c))
+
+    def turned(self, angle):
+        """The same body turned by ``angle`` (rad) about Z through O."""
+        rot = rotation_z(angle)
+        return MassProperties(self.mass, rot @ self.first_moment,
+                              rot @ self.inertia @ rot.T)
+
+
+def parallel_axis_cvc(inertia_com, mass, r_o, phi_o, z_o):
+    """Inertia about a point B from the inertia about the centre of mass G.
+
+    The thesis's Eq. 3.7 in cylindrical vector components: the centre of mass
+    lies at (r_o cos phi_o, r_o sin phi_o, z_o) from B, axes parallel. Works
+    on one tensor (3, 3) or a stack (n, 3, 3) with (n,) parameters. Returns
+    tensor elements; the products of inertia shift by
+    P_xy += m r_o^2 cos sin, P_xz += m r_o z_o cos, P_yz += m r_o z_o sin.
+    """
+    mass = np.asarray(mass, dtype=float)
+    c, s = np.cos(phi_o), np.sin(phi_o)
+    shifted = np.array(inertia_com, dtype=float, copy=True)
+    shifted[..., 0, 0] += mass * (r_o**2 * s**2 + z_o**2)
+    shifted[..., 1, 1] += mass * (r_o**2 * c**2 + z_o**2)
+    shifted[..., 2, 2] += mass * r_o**2
+    p_xy = mass * r_o**2 * c * s
+    p_xz = mass * r_o * z_o * c
+    p_yz = mass * r_o * z_o * s
+    for (i, j), p in (((0, 1), p_xy), ((0, 2), p_xz), ((1, 2), p_yz)):
+        shifted[..., i, j] -= p
+        shifted[..., j, i] -= p
+    return shifted
+
+
+def place(mass, inertia_own, radius, angle, z):
+    """Bodies placed on the rotor at (R, theta, z), summed into one value.
+
+    ``inertia_own`` is each body's tensor about its centre of mass in its own
+    (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one);
+    ``mass``, ``radius`` (m), ``angle`` (rad) and ``z`` (m) are (n,) or
+    scalars. Vectorised: the cost is a few numpy calls whatever n is.
+    """
+    mass = np.atleast_1d(np.asarray(mass, dtype=float))
+    radius = np.broadcast_to(np.asarray(radius, dtype=float), mass.shape)
+    angle = np.broadcast_to(np.asarray(angle, dtype=float), mass.shape)
+    z = np.broadcast_to(np.asarray(z, dtype=float), mass.shape)
+    inertia_own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
+    c, s = np.cos(angle), np.sin(angle)
+    # Own frame -> rotor frame axes: R(theta) I R(theta)^T, element by element.
+    rot = np.zeros(mass.shape + (3, 3))
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
+    rot[:, 2, 2] = 1.0
+    inertia_com = rot @ inertia_own @ np.swapaxes(rot, 1, 2)
+    about_o = parallel_axis_cvc(inertia_com, mass, radius, angle, z)
+    first = np.stack([mass * radius * c, mass * radius * s, mass * z], axis=1)
+    return MassProperties(float(mass.sum()), first.sum(axis=0), about_o.sum(axis=0))
+
+
+def solid_cylinder(mass, radius, length, axis='axial'):
+    """Solid cylinder about its centre of mass, own frame (kg m^2)."""
+    along = 0.5 * mass * radius**2
+    across = mass * (3.0 * radius**2 + length**2) / 12.0
+    return _axisymmetric(along, across, axis)
+
+
+def tube(mass, inner_radius, outer_radius, length, axis='axial'):
+    """Thick-walled tube (hollow cylinder) about its centre of mass, own frame."""
+    r2 = inner_radius**2 + outer_radius**2
+    along = 0.5 * mass * r2
+    across = mass * (3.0 * r2 + length**2) / 12.0
+    return _axisymmetric(along, across, axis)
+
+
+def box(mass, size):
+    """Solid box with edges (radial, tangential, axial) = ``size`` (m)."""
+    a, b, c = size
+    return tensor_from_elements(mass * (b**2 + c**2) / 12.0, mass * (a**2 + c**2) / 12.0,
+                                mass * (a**2 + b**2) / 12.0, 0.0, 0.0, 0.0)
+
+
+def sphere(mass, radius):
+    """Solid sphere about its centre."""
+    i = 0.4 * mass * radius**2
+    return tensor_from_elements(i, i, i, 0.0, 0.0, 0.0)
+
+
+def _axisymmetric(along, across, axis):
+    diagonal = [across, across, across]
+    diagonal[SHAPE_AXES.index(axis)] = along
+    return np.diag(diagonal)

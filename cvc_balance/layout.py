@@ -1,0 +1,327 @@
+"""The layout: which components sit where on the rotor, and its supports.
+
+This module owns the layout contract (documented in README.md): it turns a
+mapping (parsed from YAML or JSON) into a validated, immutable
+:class:`Layout`, or raises :class:`LayoutError` with one line naming the
+component and the field that is wrong. Lengths m, masses kg, angles rad
+(``angle_deg`` accepted at the edge), gravity m/s^2 in the stator frame.
+No file I/O: :mod:`cvc_balance.layout_file` reads files and text.
+"""
+
+from dataclasses import asdict, dataclass
+import hashlib
+import json
+import math
+
+import numpy as np
+
+from cvc_balance.frames import DEFAULT_GRAVITY, radians, tensor_from_elements
+
+SHAPE_FIELDS = {
+    'point': (),
+    'cylinder': ('radius', 'length'),
+    'tube': ('inner_radius', 'outer_radius', 'length'),
+    'box': ('size',),
+    'sphere': ('radius',),
+}
+AXIAL_SHAPES = ('cylinder', 'tube')
+AXES = ('radial', 'tangential', 'axial')
+INERTIA_FIELDS = ('ixx', 'iyy', 'izz', 'ixy', 'ixz', 'iyz')
+DEFAULT_GRADE = 6.3
+"""ISO 21940-11 grade (mm/s) when a layout names none: general machinery."""
+
+
+class LayoutError(ValueError):
+    """A layout that cannot be used; ``str()`` is one line naming what is wrong."""
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A component's solid shape, lengths in m, ``size`` = (radial, tangential, axial)."""
+
+    type: str
+    radius: float = 0.0
+    length: float = 0.0
+    inner_radius: float = 0.0
+    outer_radius: float = 0.0
+    size: tuple = ()
+    axis: str = 'axial'
+
+
+@dataclass(frozen=True)
+class Component:
+    """One rigid component bolted to the rotor.
+
+    ``radius`` (m), ``angle`` (rad, from rotor X toward rotor Y) and ``z`` (m)
+    place its centre of mass. Its own inertia is ``shape`` or ``inertia``
+    (URDF tensor elements about the centre of mass, own frame); with neither
+    it is a point mass.
+    """
+
+    name: str
+    mass: float
+    radius: float
+    angle: float
+    z: float = 0.0
+    shape: Shape = None
+    inertia: tuple = None
+
+
+@dataclass(frozen=True)
+class Support:
+    """A bearing on the spin axis at ``z`` (m); ``axial`` takes the thrust."""
+
+    name: str
+    z: float
+    axial: bool = False
+
+
+@dataclass(frozen=True)
+class Balancing:
+    """Balancing settings: correction planes, radius, ISO grade, service speed.
+
+    ``planes`` = (z_I, z_II), m, z_I < z_II, or None (then the two supports';
+    with one support, no two-plane resolution). ``correction_radius`` m or
+    None (then the largest component radius). ``grade`` mm/s.
+    ``service_speed`` rad/s or None (then the speed asked about).
+    """
+
+    planes: tuple = None
+    correction_radius: float = None
+    grade: float = DEFAULT_GRADE
+    service_speed: float = None
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A validated layout; ``gravity`` m/s^2 in the stator frame."""
+
+    name: str
+    components: tuple
+    supports: tuple
+    gravity: tuple = DEFAULT_GRAVITY
+    balancing: Balancing = Balancing()
+    description: str = ''
+
+    def digest(self):
+        """Short SHA-256 of the layout's canonical JSON: same layout, same digest."""
+        text = json.dumps(asdict(self), sort_keys=True, separators=(',', ':'))
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+    def correction_planes(self):
+        """(z_I, z_II) in m, or None when neither given nor two supports."""
+        if self.balancing.planes is not None:
+            return self.balancing.planes
+        if len(self.supports) == 2:
+            return tuple(sorted(s.z for s in self.supports))
+        return None
+
+    def correction_radius(self):
+        """Radius (m) at which correction masses go."""
+        if self.balancing.correction_radius is not None:
+            return self.balancing.correction_radius
+        return max(c.radius for c in self.components)
+
+
+def parse_layout(data):
+    """Validate a mapping (parsed YAML/JSON) into a :class:`Layout`.
+
+    Raises :class:`LayoutError` naming the first thing that is wrong.
+    """
+    _mapping(data, 'layout')
+    _known_keys(data, ('name', 'description', 'components', 'supports', 'gravity',
+                       'balancing'), 'layout')
+    name = _text(_required(data, 'name', 'layout'), 'layout: field name')
+    components = _list(_required(data, 'components', 'layout'), 'layout: field components')
+    if not components:
+        raise LayoutError('layout: field components: needs at least one component')
+    parsed = tuple(_component(item, i) for i, item in enumerate(components))
+    _unique([c.name for c in parsed], 'component')
+    supports = _supports(_required(data, 'supports', 'layout'))
+    gravity = DEFAULT_GRAVITY
+    if 'gravity' in data:
+        gravity = _vector(data['gravity'], 3, 'layout: field gravity')
+    balancing = _balancing(data.get('balancing', {}))
+    description = _text(data.get('description', ''), 'layout: field description',
+                        allow_empty=True)
+    return Layout(name, parsed, supports, gravity, balancing, description)
+
+
+def _component(item, index):
+    where = f'component #{index + 1}'
+    _mapping(item, where)
+    if isinstance(item.get('name'), str) and item['name']:
+        where = f"component '{item['name']}'"
+    _known_keys(item, ('name', 'mass', 'radius', 'angle', 'angle_deg', 'z', 'shape',
+                       'inertia'), where)
+    name = _text(_required(item, 'name', where), f'{where}: field name')
+    mass = _number(_required(item, 'mass', where), f'{where}: field mass', minimum=0.0,
+                   strict=True)
+    radius = _number(_required(item, 'radius', where), f'{where}: field radius', minimum=0.0)
+    if ('angle' in item) == ('angle_deg' in item):
+        raise LayoutError(f'{where}: give exactly one of fields angle (rad) and angle_deg')
+    if 'angle' in item:
+        angle = _number(item['angle'], f'{where}: field angle')
+    else:
+        angle = radians(_number(item['angle_deg'], f'{where}: field angle_deg'))
+    z = _number(item.get('z', 0.0), f'{where}: field z')
+    if 'shape' in item and 'inertia' in item:
+        raise LayoutError(f'{where}: give field shape or field inertia, not both')
+    shape = _shape(item['shape'], where) if 'shape' in item else None
+    inertia = _inertia(item['inertia'], where) if 'inertia' in item else None
+    return Component(name, mass, radius, angle, z, shape, inertia)
+
+
+def _shape(spec, where):
+    _mapping(spec, f'{where}: field shape')
+    kind = spec.get('type')
+    if kind not in SHAPE_FIELDS:
+        raise LayoutError(f'{where}: field shape.type: unknown shape {kind!r}, '
+                          f'expected one of {", ".join(SHAPE_FIELDS)}')
+    allowed = ('type',) + SHAPE_FIELDS[kind] + (('axis',) if kind in AXIAL_SHAPES else ())
+    _known_keys(spec, allowed, f'{where}: field shape ({kind})')
+    values = {}
+    for key in SHAPE_FIELDS[kind]:
+        field = f'{where}: field shape.{key}'
+        if key == 'size':
+            values[key] = _vector(_required(spec, key, f'{where}: field shape'), 3, field,
+                                  minimum=0.0)
+        else:
+            values[key] = _number(_required(spec, key, f'{where}: field shape'), field,
+                                  minimum=0.0, strict=True)
+    if kind == 'tube' and not values['inner_radius'] < values['outer_radius']:
+        raise LayoutError(f'{where}: field shape.inner_radius must be less than outer_radius')
+    if 'axis' in spec and spec['axis'] not in AXES:
+        raise LayoutError(f'{where}: field shape.axis: unknown axis {spec["axis"]!r}, '
+                          f'expected one of {", ".join(AXES)}')
+    return Shape(kind, axis=spec.get('axis', 'axial'), **values)
+
+
+def _inertia(spec, where):
+    _mapping(spec, f'{where}: field inertia')
+    _known_keys(spec, INERTIA_FIELDS, f'{where}: field inertia')
+    values = tuple(_number(_required(spec, k, f'{where}: field inertia'),
+                           f'{where}: field inertia.{k}') for k in INERTIA_FIELDS)
+    _check_physical(values, where)
+    return values
+
+
+def _check_physical(elements, where):
+    """Reject tensors no body has: principal moments >= 0, triangle inequality."""
+    moments = sorted(np.linalg.eigvalsh(tensor_from_elements(*elements)))
+    slack = 1e-9 * max(abs(sum(moments)), 1e-300)
+    low, mid, high = moments
+    if low < -slack or low + mid < high - slack:
+        raise LayoutError(f'{where}: field inertia: not the inertia of a body (principal '
+                          f'moments {low:.6g}, {mid:.6g}, {high:.6g} kg m^2 must be >= 0 '
+                          'and satisfy the triangle inequality)')
+
+
+def _supports(value):
+    items = _list(value, 'layout: field supports')
+    if not 1 <= len(items) <= 2:
+        raise LayoutError(f'layout: field supports: needs 1 or 2 supports, got {len(items)}')
+    supports = []
+    for i, item in enumerate(items):
+        where = f'support #{i + 1}'
+        _mapping(item, where)
+        if isinstance(item.get('name'), str) and item['name']:
+            where = f"support '{item['name']}'"
+        _known_keys(item, ('name', 'z', 'axial'), where)
+        name = _text(_required(item, 'name', where), f'{where}: field name')
+        z = _number(_required(item, 'z', where), f'{where}: field z')
+        axial = item.get('axial', False)
+        if not isinstance(axial, bool):
+            raise LayoutError(f'{where}: field axial must be true or false, got {axial!r}')
+        supports.append(Support(name, z, axial))
+    _unique([s.name for s in supports], 'support')
+    if len(supports) == 2:
+        if supports[0].z == supports[1].z:
+            raise LayoutError('layout: field supports: the two supports need different z')
+        if sum(s.axial for s in supports) != 1:
+            raise LayoutError('layout: field supports: mark exactly one of the two supports '
+                              'axial: true (it takes the axial force)')
+    return tuple(supports)
+
+
+def _balancing(spec):
+    _mapping(spec, 'layout: field balancing')
+    _known_keys(spec, ('planes', 'correction_radius', 'grade', 'service_speed'),
+                'layout: field balancing')
+    planes = None
+    if 'planes' in spec:
+        planes = _vector(spec['planes'], 2, 'layout: field balancing.planes')
+        if not planes[0] < planes[1]:
+            raise LayoutError('layout: field balancing.planes: give [z_I, z_II] with '
+                              'z_I < z_II')
+    radius = None
+    if 'correction_radius' in spec:
+        radius = _number(spec['correction_radius'], 'layout: field balancing.correction_radius',
+                         minimum=0.0, strict=True)
+    grade = _number(spec.get('grade', DEFAULT_GRADE), 'layout: field balancing.grade',
+                    minimum=0.0, strict=True)
+    speed = None
+    if 'service_speed' in spec:
+        speed = _number(spec['service_speed'], 'layout: field balancing.service_speed',
+                        minimum=0.0, strict=True)
+    return Balancing(planes, radius, grade, speed)
+
+
+def _required(mapping, key, where):
+    if key not in mapping:
+        raise LayoutError(f'{where}: missing field {key}')
+    return mapping[key]
+
+
+def _mapping(value, where):
+    if not isinstance(value, dict):
+        raise LayoutError(f'{where}: expected a mapping of fields, got {_kind(value)}')
+
+
+def _list(value, where):
+    if not isinstance(value, list):
+        raise LayoutError(f'{where}: expected a list, got {_kind(value)}')
+    return value
+
+
+def _known_keys(mapping, allowed, where):
+    for key in mapping:
+        if key not in allowed:
+            raise LayoutError(f'{where}: unknown field {key!r} (known: {", ".join(allowed)})')
+
+
+def _text(value, where, allow_empty=False):
+    if not isinstance(value, str) or (not value and not allow_empty):
+        raise LayoutError(f'{where} must be a non-empty string, got {value!r}')
+    return value
+
+
+def _number(value, where, minimum=None, strict=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise LayoutError(f'{where} must be a number, got {_kind(value)} {value!r}')
+    value = float(value)
+    if not math.isfinite(value):
+        raise LayoutError(f'{where} must be finite, got {value}')
+    if minimum is not None and (value < minimum or (strict and value == minimum)):
+        bound = '>' if strict else '>='
+        raise LayoutError(f'{where} must be {bound} {minimum:g}, got {value:g}')
+    return value
+
+
+def _vector(value, length, where, minimum=None):
+    if not isinstance(value, list) or len(value) != length:
+        raise LayoutError(f'{where} must be a list of {length} numbers, got {value!r}')
+    strict = minimum is not None
+    return tuple(_number(v, f'{where}[{i}]', minimum, strict) for i, v in enumerate(value))
+
+
+def _unique(names, what):
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise LayoutError(f"{what} '{name}': duplicate name (names must be unique)")
+        seen.add(name)
+
+
+def _kind(value):
+    return type(value).__name__

@@ -1,0 +1,76 @@
+"""Static, couple and dynamic unbalance of a rotor, and its correction masses.
+
+Everything here is a property of the layout (no motion sample needed) and is
+read off the aggregates of :class:`cvc_balance.engine.RotorModel`, O(1):
+
+* static unbalance U = int r_xy dm = (S_x, S_y), kg m;
+* couple unbalance (P_xz, P_yz) about the centre of mass, kg m^2, with
+  P_xz = int x z dm: for equal and opposite unbalances in two planes its
+  angle is that of the one at greater z;
+* dynamic unbalance resolved into two correction planes z_I < z_II: the
+  unbalances U_I, U_II with U_I + U_II = U and z_I U_I + z_II U_II = P_O
+  (P_O = (P_xz, P_yz) about O), i.e. ISO 21940-2's two-plane split
+  U_I = sum U_i (z_II - z_i) / b, U_II = sum U_i (z_i - z_I) / b;
+* correction masses: at the correction radius, opposite each plane's
+  unbalance, so that adding them leaves no static and no couple unbalance.
+
+Amounts SI (kg m, kg m^2, kg), angles rad in the rotor frame.
+"""
+
+from dataclasses import dataclass
+import math
+
+from cvc_balance.frames import polar
+
+
+@dataclass(frozen=True)
+class PlaneUnbalance:
+    """Unbalance in one correction plane and the mass that cancels it.
+
+    ``amount`` kg m at ``angle`` rad (rotor frame); ``correction_mass`` kg at
+    ``correction_radius`` m and ``correction_angle`` rad, in the plane at ``z`` m.
+    """
+
+    z: float
+    amount: float
+    angle: float
+    correction_mass: float
+    correction_radius: float
+    correction_angle: float
+
+    @property
+    def vector(self):
+        """(x, y) components, kg m."""
+        return self.amount * math.cos(self.angle), self.amount * math.sin(self.angle)
+
+
+def static_unbalance(model):
+    """(U_x, U_y) = int r_xy dm, kg m, rotor frame."""
+    return model.s_x, model.s_y
+
+
+def couple_unbalance(model):
+    """(P_xz, P_yz) about the rotor's centre of mass, kg m^2, rotor frame."""
+    z_com = model.s_z / model.mass
+    return model.p_xz - model.s_x * z_com, model.p_yz - model.s_y * z_com
+
+
+def plane_unbalances(model, z_i, z_ii, correction_radius):
+    """Dynamic unbalance resolved into planes at z_i < z_ii (m).
+
+    Returns (plane I, plane II) as :class:`PlaneUnbalance`.
+    """
+    span = z_ii - z_i
+    planes = []
+    for z, (u_x, u_y) in (
+            (z_i, ((z_ii * model.s_x - model.p_xz) / span, (z_ii * model.s_y - model.p_yz) / span)),
+            (z_ii, ((model.p_xz - z_i * model.s_x) / span, (model.p_yz - z_i * model.s_y) / span))):
+        amount, angle = polar(u_x, u_y)
+        planes.append(PlaneUnbalance(z, amount, angle, amount / correction_radius,
+                                     correction_radius, _opposite(angle)))
+    return tuple(planes)
+
+
+def _opposite(angle):
+    """The angle half a turn away, kept in (-pi, pi]."""
+    return angle - math.pi if angle > 0.0 else angle + math.pi

@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# cvc_balance developer entry point: sets up .venv on first use, then runs a job.
+#   ./dev.sh demo      the main job on the bundled defaults
+#   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
+#   ./dev.sh setup     only (re)create the virtual environment
+#   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+venv="$here/.venv"
+stamp="$venv/.requirements.sha256"
+
+find_python() {
+  for candidate in python3.11 python3; do
+    if command -v "$candidate" >/dev/null 2>&1 &&
+       "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+      echo "$candidate"; return 0
+    fi
+  done
+  # Debian: python3.11 with venv support from the distribution.
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    apt-get update -qq && apt-get install -y -qq python3.11 python3.11-venv >/dev/null
+    echo python3.11; return 0
+  fi
+  echo "dev.sh: needs Python 3.11 (the ROS 2 Jazzy wheels are built for it)" >&2
+  return 1
+}
+
+pip_quiet() {
+  # This machine's pip configuration names local mirrors that may be absent: drop
+  # those warnings, keep every other message and pip's exit status.
+  "$venv/bin/python" -m pip -q "$@" 2> >(grep -v "^WARNING: Location 'file:" >&2)
+}
+
+setup() {
+  local want
+  want="$(cat "$here/requirements.txt" "$here/requirements-test.txt" "$here/setup.py" | sha256sum)"
+  if [ -x "$venv/bin/python" ] && [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ]; then
+    return 0
+  fi
+  local python
+  python="$(find_python)"
+  echo "dev.sh: setting up $venv (one-time, about a minute)" >&2
+  "$python" -m venv "$venv"
+  pip_quiet install --upgrade pip
+  pip_quiet install -r "$here/requirements-test.txt"
+  pip_quiet install --no-deps -e "$here"
+  echo "$want" > "$stamp"
+}
+
+in_venv() {
+  export PATH="$venv/bin:$PATH" VIRTUAL_ENV="$venv"
+  # ROS packages from the wheels live in the venv prefix; colcon and ament look here.
+  export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+  export RERUN_TELEMETRY_ENABLED=false HYPOTHESIS_NO_PLUGINS=1
+  "$@"
+}
+
+colcon_check() {
+  # colcon build and a colcon test smoke run, outside the source tree.
+  local base="$here/.colcon"
+  rm -rf "$base"
+  (cd "$here" && in_venv colcon --log-base "$base/log" build --base-paths "$here" \
+      --build-base "$base/build" --install-base "$base/install" >/dev/null)
+  (cd "$here" && in_venv colcon --log-base "$base/log" test --base-paths "$here" \
+      --build-base "$base/build" --install-base "$base/install" \
+      --pytest-args -q -p no:cacheprovider -k "lint or thesis" >/dev/null)
+  in_venv colcon test-result --test-result-base "$base/build" --verbose
+}
+
+cmd="${1:-}"
+shift || true
+case "$cmd" in
+  setup) setup ;;
+  demo)
+    setup
+    in_venv cvc-balance solve "$here/config/ct_gantry.yaml" --omega 23.27 "$@" ;;
+  test)
+    setup
+    colcon_check
+    cd "$here" && in_venv python -m pytest "$@" ;;
+  run)
+    setup
+    in_venv "$@" ;;
+  *)
+    sed -n '2,7p' "$0" >&2
+    exit 2 ;;
+esac
