@@ -43,7 +43,7 @@ setup() {
   "$python" -m venv "$venv"
   pip_quiet install --upgrade pip
   pip_quiet install -r "$here/requirements-test.txt"
-  pip_quiet install --no-deps -e "$here"
+  PYTHONWARNINGS=ignore pip_quiet install --no-deps -e "$here"
   echo "$want" > "$stamp"
 }
 

@@ -1,4 +1,5 @@
-"""A rotor's balance against its ISO 21940-11 grade: the service engineer's view.
+"""
+A rotor's balance against its ISO 21940-11 grade: the service engineer's view.
 
 Combines :mod:`cvc_balance.unbalance` (where the unbalance is, what corrects
 it) with :mod:`cvc_balance.iso21940` (how much is allowed) for one speed.
@@ -14,7 +15,8 @@ from cvc_balance.unbalance import couple_unbalance, plane_unbalances, static_unb
 
 @dataclass(frozen=True)
 class BalanceAssessment:
-    """Unbalance of a rotor and its verdict against a grade at a speed.
+    """
+    Unbalance of a rotor and its verdict against a grade at a speed.
 
     ``planes`` is (plane I, plane II) or () when the layout has no two
     correction planes; ``plane_permissible`` the U_per share (kg m) of each.
@@ -36,12 +38,13 @@ class BalanceAssessment:
 
     @property
     def within_grade(self):
-        """True when every plane (or the static unbalance) is within its U_per share."""
+        """Tell whether every plane (or the static unbalance) is within its U_per share."""
         return self.equivalent_grade <= self.grade
 
 
 def assess_balance(model, omega=None):
-    """Assess ``model`` (a RotorModel) at ``omega`` rad/s (default: the layout's service speed).
+    """
+    Assess ``model`` (a RotorModel) at ``omega`` rad/s (default: the layout's service speed).
 
     Raises ValueError when neither is given.
     """

@@ -1,4 +1,5 @@
-"""The ``cvc-balance`` command line: an adapter around the engine.
+"""
+The ``cvc-balance`` command line: an adapter around the engine.
 
 ``cvc-balance solve LAYOUT --omega W`` prints the loads for one motion sample
 and the balance verdict, as a table for people or, with ``--json``, one
@@ -81,7 +82,7 @@ def _solve(args):
 
 
 def solve_summary(model, result, assessment, omega, alpha, q, gravity):
-    """The solve result as plain JSON-able data (SI; angles in degrees for people)."""
+    """Collect the solve result as plain JSON-able data (SI; angles in degrees for people)."""
     static = static_unbalance(model)
     couple = couple_unbalance(model)
     layout = model.layout
@@ -127,7 +128,7 @@ def solve_summary(model, result, assessment, omega, alpha, q, gravity):
 
 
 def format_table(s):
-    """The solve result as a table for people."""
+    """Format the solve result as a table for people."""
     sample = s['sample']
     lines = [
         f"layout {s['layout']['name']} ({s['layout']['components']} components, "
@@ -168,9 +169,10 @@ def format_table(s):
         lines.append(f"{'plane':6}{'z [m]':>8}{'U [g mm]':>11}{'angle':>9}{'allowed':>10}"
                      '   correction mass')
         for label, p in zip(('I', 'II'), balance['planes']):
+            grams = p['correction_mass_kg'] * 1e3
             lines.append(f"{label:6}{p['z']:8.3f}{p['g_mm']:11.1f}{p['angle_deg']:9.2f}"
-                         f"{p['permissible_g_mm']:10.1f}   {p['correction_mass_kg'] * 1e3:.1f} g "
-                         f"at r {p['correction_radius']:.3f} m, {p['correction_angle_deg']:.2f} deg")
+                         f"{p['permissible_g_mm']:10.1f}   {grams:.1f} g at r "
+                         f"{p['correction_radius']:.3f} m, {p['correction_angle_deg']:.2f} deg")
     finest = balance['finest_grade_met']
     verdict = 'WITHIN' if balance['within_grade'] else 'OUT OF'
     lines.append(f"achieved: G {balance['equivalent_grade']:.3g} mm/s (finest standard grade met: "

@@ -1,4 +1,5 @@
-"""Loads a spinning rotor puts on its stator: the CVC engine.
+"""
+Loads a spinning rotor puts on its stator: the CVC engine.
 
 The layout is reduced once to its aggregates about O (mass, first moments,
 products of inertia P_xz, P_yz, moment of inertia I_zz, in the rotor frame);
@@ -19,8 +20,10 @@ the stator (minus the support reaction on the rotor), about O, rotor frame:
 Frames, signs and units are those of :mod:`cvc_balance.frames`. numpy only.
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 import math
+import os
 
 import numpy as np
 
@@ -28,13 +31,24 @@ from cvc_balance import inertia as shapes
 from cvc_balance.frames import products_of_inertia, tensor_from_elements, turn_xy
 from cvc_balance.inertia import place
 
-CHUNK = 1 << 15
+CHUNK = 1 << 16
 """Samples per block in the vectorised path: the temporaries stay in cache."""
+
+_POOL = []
+
+
+def _pool():
+    """Return the worker threads of the vectorised path, one per core, made on first use."""
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 1,
+                                        thread_name_prefix='cvc_engine'))
+    return _POOL[0]
 
 
 @dataclass(frozen=True)
 class RotorModel:
-    """A layout's aggregates about O in the rotor frame, computed once.
+    """
+    A layout's aggregates about O in the rotor frame, computed once.
 
     ``body`` holds the full mass properties; the scalars below are what the
     per-sample equations read (kg, kg m, kg m^2, m/s^2).
@@ -65,12 +79,12 @@ class RotorModel:
 
     @property
     def supports(self):
-        """The layout's supports."""
+        """Return the layout's supports."""
         return self.layout.supports
 
 
 def own_inertia(component):
-    """A component's inertia tensor about its centre of mass, own frame (kg m^2)."""
+    """Return a component's inertia tensor about its centre of mass, own frame (kg m^2)."""
     if component.inertia is not None:
         return tensor_from_elements(*component.inertia)
     shape = component.shape
@@ -87,7 +101,8 @@ def own_inertia(component):
 
 
 def rotor_frame_loads(model, cos_q, sin_q, omega, alpha, gravity):
-    """Load on the stator about O, rotor frame, and the drive torque.
+    """
+    Load on the stator about O, rotor frame, and the drive torque.
 
     Plain arithmetic: works on floats (the per-message path) and on numpy
     arrays (the vectorised path). ``gravity`` = (g_x, g_y, g_z), stator frame.
@@ -107,7 +122,8 @@ def rotor_frame_loads(model, cos_q, sin_q, omega, alpha, gravity):
 
 
 def support_loads(supports, f_x, f_y, f_z, m_x, m_y):
-    """Split a load (force, moment about O) over the supports on the axis.
+    """
+    Split a load (force, moment about O) over the supports on the axis.
 
     Any frame turning about Z (the supports are on the axis). Two supports:
     the force at each, the axial force on the one marked axial, no moments.
@@ -127,7 +143,8 @@ def support_loads(supports, f_x, f_y, f_z, m_x, m_y):
 
 @dataclass(frozen=True)
 class SampleLoads:
-    """Loads for one motion sample (floats; N, N m).
+    """
+    Loads for one motion sample (floats; N, N m).
 
     ``*_stator`` in the stator frame, ``*_rotor`` in the rotor frame, moments
     about O; ``supports`` maps each support's name to (force, moment), stator
@@ -143,7 +160,7 @@ class SampleLoads:
 
 
 def sample_loads(model, q, omega, alpha=0.0, gravity=None):
-    """Loads for one sample in plain Python floats (no numpy: the live path)."""
+    """Compute the loads for one sample in plain Python floats (no numpy: the live path)."""
     cos_q, sin_q = math.cos(q), math.sin(q)
     g = model.gravity if gravity is None else gravity
     f_x, f_y, f_z, m_x, m_y, torque = rotor_frame_loads(model, cos_q, sin_q, omega, alpha, g)
@@ -156,7 +173,8 @@ def sample_loads(model, q, omega, alpha=0.0, gravity=None):
 
 @dataclass(frozen=True)
 class Loads:
-    """Loads over n motion samples; each field an (n, 3) or (n,) array view.
+    """
+    Loads over n motion samples; each field an (n, 3) or (n,) array view.
 
     Same meanings as :class:`SampleLoads`; ``support_force`` and
     ``support_moment`` map support names to (n, 3) arrays, stator frame.
@@ -171,12 +189,13 @@ class Loads:
     support_moment: dict
 
     def __len__(self):
-        """Number of samples."""
+        """Return the number of samples."""
         return len(self.drive_torque)
 
 
 def loads(model, q, omega, alpha=0.0, gravity=None):
-    """Loads for arrays of motion samples, vectorised.
+    """
+    Compute the loads for arrays of motion samples, vectorised.
 
     ``q`` (rad), ``omega`` (rad/s), ``alpha`` (rad/s^2) broadcast to n
     samples; ``gravity`` is a stator-frame 3-vector or an (n, 3) array (tilt
@@ -191,7 +210,8 @@ def loads(model, q, omega, alpha=0.0, gravity=None):
     n_support = len(model.supports)
     # Rows: F_rotor(3) M_rotor(3) F_stator(3) M_stator(3) torque(1) supports(6 each).
     out = np.zeros((13 + 6 * n_support, n))
-    for start in range(0, n, CHUNK):
+
+    def fill(start):
         part = slice(start, min(start + CHUNK, n))
         q_part = q[part]
         cos_q, sin_q = np.cos(q_part), np.sin(q_part)
@@ -207,6 +227,14 @@ def loads(model, q, omega, alpha=0.0, gravity=None):
         for row, value in enumerate(rows):
             if not (isinstance(value, float) and value == 0.0):  # out starts at zero
                 out[row, part] = value
+
+    starts = range(0, n, CHUNK)
+    if len(starts) > 1:
+        # numpy releases the GIL inside each call: blocks run on all cores.
+        list(_pool().map(fill, starts))
+    else:
+        for start in starts:
+            fill(start)
     names = [s.name for s in model.supports]
     return Loads(out[0:3].T, out[3:6].T, out[6:9].T, out[9:12].T, out[12],
                  {name: out[13 + 6 * i:16 + 6 * i].T for i, name in enumerate(names)},

@@ -1,4 +1,5 @@
-"""Frames, signs and units of cvc_balance: the one module that owns them.
+"""
+Frames, signs and units of cvc_balance: the one module that owns them.
 
 Frames (REP-103 / REP-105 style, right-handed, SI units):
 
@@ -45,7 +46,8 @@ def rotation_z(angle):
 
 
 def turn_xy(x, y, cos_a, sin_a):
-    """Turn the XY part of a vector by the angle whose cosine and sine are given.
+    """
+    Turn the XY part of a vector by the angle whose cosine and sine are given.
 
     With (cos q, sin q) this maps rotor-frame components to the stator frame;
     with (cos q, -sin q) stator to rotor. Works on floats and on numpy arrays
@@ -56,7 +58,8 @@ def turn_xy(x, y, cos_a, sin_a):
 
 
 def products_of_inertia(tensor):
-    """Products of inertia (P_xy, P_xz, P_yz) = (int xy dm, int xz dm, int yz dm).
+    """
+    Products of inertia (P_xy, P_xz, P_yz) = (int xy dm, int xz dm, int yz dm).
 
     ``tensor`` is a 3x3 inertia tensor (tensor elements, ixy = -int xy dm);
     returns kg m^2.

@@ -1,4 +1,5 @@
-"""Mass properties as composable values, and the inertia of the layout's shapes.
+"""
+Mass properties as composable values, and the inertia of the layout's shapes.
 
 A :class:`MassProperties` is mass, first mass moment and inertia tensor about
 the origin of the frame it is expressed in, like Pinocchio's ``Inertia``:
@@ -24,7 +25,8 @@ SHAPE_AXES = ('radial', 'tangential', 'axial')
 
 @dataclass(frozen=True)
 class MassProperties:
-    """Mass, first moment and inertia tensor about the frame origin O.
+    """
+    Mass, first moment and inertia tensor about the frame origin O.
 
     ``first_moment`` is int r dm (kg m, shape (3,)); ``inertia`` the 3x3
     tensor about O (kg m^2, tensor elements).
@@ -36,7 +38,7 @@ class MassProperties:
 
     @classmethod
     def zero(cls):
-        """The empty body."""
+        """Return the empty body."""
         return cls(0.0, np.zeros(3), np.zeros((3, 3)))
 
     def __add__(self, other):
@@ -56,14 +58,15 @@ class MassProperties:
         return self.inertia - self.mass * (c @ c * np.eye(3) - np.outer(c, c))
 
     def turned(self, angle):
-        """The same body turned by ``angle`` (rad) about Z through O."""
+        """Return the same body turned by ``angle`` (rad) about Z through O."""
         rot = rotation_z(angle)
         return MassProperties(self.mass, rot @ self.first_moment,
                               rot @ self.inertia @ rot.T)
 
 
 def parallel_axis_cvc(inertia_com, mass, r_o, phi_o, z_o):
-    """Inertia about a point B from the inertia about the centre of mass G.
+    """
+    Inertia about a point B from the inertia about the centre of mass G.
 
     The thesis's Eq. 3.7 in cylindrical vector components: the centre of mass
     lies at (r_o cos phi_o, r_o sin phi_o, z_o) from B, axes parallel. Works
@@ -87,7 +90,8 @@ def parallel_axis_cvc(inertia_com, mass, r_o, phi_o, z_o):
 
 
 def place(mass, inertia_own, radius, angle, z):
-    """Bodies placed on the rotor at (R, theta, z), summed into one value.
+    """
+    Bodies placed on the rotor at (R, theta, z), summed into one value.
 
     ``inertia_own`` is each body's tensor about its centre of mass in its own
     (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one);
@@ -118,7 +122,7 @@ def solid_cylinder(mass, radius, length, axis='axial'):
 
 
 def tube(mass, inner_radius, outer_radius, length, axis='axial'):
-    """Thick-walled tube (hollow cylinder) about its centre of mass, own frame."""
+    """Inertia of a thick-walled hollow cylinder about its centre of mass, own frame."""
     r2 = inner_radius**2 + outer_radius**2
     along = 0.5 * mass * r2
     across = mass * (3.0 * r2 + length**2) / 12.0

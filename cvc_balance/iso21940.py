@@ -1,4 +1,5 @@
-"""ISO 21940-11 balance quality grades for rigid rotors.
+"""
+ISO 21940-11 balance quality grades for rigid rotors.
 
 Permissible residual unbalance U_per = G m / Omega (SI: G in m/s, U_per in
 kg m); the standard quotes G in mm/s and U_per in g mm, where
@@ -32,7 +33,8 @@ def plane_shares(z_com, z_a, z_b):
 
 
 def equivalent_grade(plane_amounts, shares, mass, omega):
-    """The G (mm/s) at which the worst plane just meets its allocated U_per.
+    """
+    Return the G (mm/s) at which the worst plane just meets its allocated U_per.
 
     ``plane_amounts`` kg m per plane, ``shares`` from :func:`plane_shares`.
     """
@@ -41,7 +43,8 @@ def equivalent_grade(plane_amounts, shares, mass, omega):
 
 
 def finest_grade_met(grade_value):
-    """The finest standard grade G (mm/s) that a rotor of this equivalent grade meets.
+    """
+    Return the finest standard grade G (mm/s) that a rotor of this equivalent grade meets.
 
     None when it is coarser than G 4000.
     """

@@ -1,4 +1,5 @@
-"""The layout: which components sit where on the rotor, and its supports.
+"""
+The layout: which components sit where on the rotor, and its supports.
 
 This module owns the layout contract (documented in README.md): it turns a
 mapping (parsed from YAML or JSON) into a validated, immutable
@@ -50,7 +51,8 @@ class Shape:
 
 @dataclass(frozen=True)
 class Component:
-    """One rigid component bolted to the rotor.
+    """
+    One rigid component bolted to the rotor.
 
     ``radius`` (m), ``angle`` (rad, from rotor X toward rotor Y) and ``z`` (m)
     place its centre of mass. Its own inertia is ``shape`` or ``inertia``
@@ -78,7 +80,8 @@ class Support:
 
 @dataclass(frozen=True)
 class Balancing:
-    """Balancing settings: correction planes, radius, ISO grade, service speed.
+    """
+    Balancing settings: correction planes, radius, ISO grade, service speed.
 
     ``planes`` = (z_I, z_II), m, z_I < z_II, or None (then the two supports';
     with one support, no two-plane resolution). ``correction_radius`` m or
@@ -124,7 +127,8 @@ class Layout:
 
 
 def parse_layout(data):
-    """Validate a mapping (parsed YAML/JSON) into a :class:`Layout`.
+    """
+    Validate a mapping (parsed YAML/JSON) into a :class:`Layout`.
 
     Raises :class:`LayoutError` naming the first thing that is wrong.
     """

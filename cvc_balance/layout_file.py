@@ -8,7 +8,8 @@ from cvc_balance.layout import LayoutError, parse_layout
 
 
 def layout_from_text(text, source='layout'):
-    """Parse YAML or JSON text into a validated Layout.
+    """
+    Parse YAML or JSON text into a validated Layout.
 
     JSON (which YAML mostly contains) is tried first so that JSON's NaN and
     Infinity are read as numbers and then rejected by the validation.

@@ -1,4 +1,5 @@
-"""Static, couple and dynamic unbalance of a rotor, and its correction masses.
+"""
+Static, couple and dynamic unbalance of a rotor, and its correction masses.
 
 Everything here is a property of the layout (no motion sample needed) and is
 read off the aggregates of :class:`cvc_balance.engine.RotorModel`, O(1):
@@ -25,7 +26,8 @@ from cvc_balance.frames import polar
 
 @dataclass(frozen=True)
 class PlaneUnbalance:
-    """Unbalance in one correction plane and the mass that cancels it.
+    """
+    Unbalance in one correction plane and the mass that cancels it.
 
     ``amount`` kg m at ``angle`` rad (rotor frame); ``correction_mass`` kg at
     ``correction_radius`` m and ``correction_angle`` rad, in the plane at ``z`` m.
@@ -56,15 +58,16 @@ def couple_unbalance(model):
 
 
 def plane_unbalances(model, z_i, z_ii, correction_radius):
-    """Dynamic unbalance resolved into planes at z_i < z_ii (m).
+    """
+    Dynamic unbalance resolved into planes at z_i < z_ii (m).
 
     Returns (plane I, plane II) as :class:`PlaneUnbalance`.
     """
     span = z_ii - z_i
+    s_x, s_y, p_xz, p_yz = model.s_x, model.s_y, model.p_xz, model.p_yz
     planes = []
-    for z, (u_x, u_y) in (
-            (z_i, ((z_ii * model.s_x - model.p_xz) / span, (z_ii * model.s_y - model.p_yz) / span)),
-            (z_ii, ((model.p_xz - z_i * model.s_x) / span, (model.p_yz - z_i * model.s_y) / span))):
+    for z, (u_x, u_y) in ((z_i, ((z_ii * s_x - p_xz) / span, (z_ii * s_y - p_yz) / span)),
+                          (z_ii, ((p_xz - z_i * s_x) / span, (p_yz - z_i * s_y) / span))):
         amount, angle = polar(u_x, u_y)
         planes.append(PlaneUnbalance(z, amount, angle, amount / correction_radius,
                                      correction_radius, _opposite(angle)))
@@ -72,5 +75,5 @@ def plane_unbalances(model, z_i, z_ii, correction_radius):
 
 
 def _opposite(angle):
-    """The angle half a turn away, kept in (-pi, pi]."""
+    """Return the angle half a turn away, kept in (-pi, pi]."""
     return angle - math.pi if angle > 0.0 else angle + math.pi

@@ -1,4 +1,5 @@
-"""Independent references for the tests: random layouts and Pinocchio's RNEA.
+"""
+Independent references for the tests: random layouts and Pinocchio's RNEA.
 
 Nothing here uses cvc_balance's physics: layouts are plain mappings (the file
 format), and Pinocchio builds each component from its own shape primitives
@@ -61,7 +62,7 @@ def random_inertia(rng, mass):
 
 
 def random_layout(rng, n=8, supports=2, tilt=True):
-    """A layout mapping: n random components, 1 or 2 supports, optionally tilted gravity."""
+    """Draw a layout mapping: n random components, 1 or 2 supports, optionally tilted gravity."""
     tilt_angle = rng.uniform(-math.radians(30), math.radians(30)) if tilt else 0.0
     layout = {
         'name': f'random_{int(rng.integers(1 << 30))}',
@@ -78,12 +79,12 @@ def random_layout(rng, n=8, supports=2, tilt=True):
 
 
 def component_angle(item):
-    """The component's angle in radians, read from the mapping."""
+    """Return the component's angle in radians, read from the mapping."""
     return item['angle'] if 'angle' in item else math.radians(item['angle_deg'])
 
 
 def pinocchio_inertia(item):
-    """The component's spatial inertia in its own frame, built with Pinocchio's primitives."""
+    """Build the component's spatial inertia in its own frame from Pinocchio's primitives."""
     m = item['mass']
     if 'inertia' in item:
         e = item['inertia']
@@ -110,7 +111,7 @@ def pinocchio_inertia(item):
 
 
 def pinocchio_model(layout):
-    """A Pinocchio model: the universe (stator), one revolute joint about Z, the rotor."""
+    """Build a Pinocchio model: the universe (stator), one revolute joint about Z, the rotor."""
     model = pin.Model()
     joint = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), 'spin')
     for item in layout['components']:
@@ -123,7 +124,8 @@ def pinocchio_model(layout):
 
 
 def pinocchio_loads(layout, q, omega, alpha, gravity):
-    """Load on the stator (rotor frame, about O) and drive torque, by RNEA.
+    """
+    Load on the stator (rotor frame, about O) and drive torque, by RNEA.
 
     ``data.f[1]`` is the spatial force the stator transmits to the rotor
     through the joint, in the joint (rotor) frame at O; the load on the stator

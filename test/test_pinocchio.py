@@ -1,4 +1,5 @@
-"""The engine and ``cvc-balance solve`` against Pinocchio's rigid-body dynamics.
+"""
+The engine and ``cvc-balance solve`` against Pinocchio's rigid-body dynamics.
 
 Random layouts (all shapes, given inertias, z offsets, one and two supports),
 tilted gravity, alpha != 0: the loads must agree with Pinocchio's RNEA to

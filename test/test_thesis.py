@@ -1,4 +1,5 @@
-"""The thesis's worked results as tests, and its errata (NOTES.md) shown by the physics.
+"""
+The thesis's worked results as tests, and its errata (NOTES.md) shown by the physics.
 
 Equation numbers are those of Jennings (2014), shared/thesis/. The thesis's
 bearing forces F1..F5 are support reactions on the rotor in the rotor frame
@@ -108,7 +109,8 @@ def test_erratum_5_eq_3_7_last_line_shifts_i_yz():
 # --- App. A: the CVC inertia integrals, numerically ------------------------------------
 
 def cvc_inertia_integrals(density, r_in, r_out, length, centre=(0.0, 0.0, 0.0), nodes=24):
-    """Eq. 2.8-2.13 over a (hollow) cylinder, dm = rho R dR dphi dZ, by quadrature.
+    """
+    Eq. 2.8-2.13 over a (hollow) cylinder, dm = rho R dR dphi dZ, by quadrature.
 
     Gauss-Legendre in R and Z (exact for these polynomials), the rectangle rule
     in phi (exact for trigonometric polynomials of low degree). ``centre`` moves
@@ -224,7 +226,8 @@ def test_engine_moments_are_eq_2_20_for_single_axis_spin():
 # --- Ch. 4: particles ----------------------------------------------------------------
 
 def eq_4_39_4_41(particles, theta, omega, g, printed_gravity=False):
-    """Thesis Eq. 4.39 / 4.41 (the n-particle form of 4.6-4.10, 4.25-4.29): F1 and F4.
+    """
+    Thesis Eq. 4.39 / 4.41 (the n-particle form of 4.6-4.10, 4.25-4.29): F1 and F4.
 
     As printed, particle i's weight enters as g cos(theta + Theta_i), projected on
     its own radial line though the sum runs along body A's axes. Gravity is one
@@ -259,7 +262,8 @@ def test_eq_4_6_to_4_10_two_particles(gravity, theta, r2, phi):
 
 
 def test_printed_gravity_terms_of_eq_4_6_lose_the_weight():
-    """At rest, phi = pi: the bearings must carry the rotor's full weight 2 m g.
+    """
+    At rest, phi = pi: the bearings must carry the rotor's full weight 2 m g.
 
     Eq. 4.6 as printed gives F1 + F2 = m g cos(theta) + m g cos(theta + pi) = 0.
     """

@@ -1,0 +1,126 @@
+"""
+Unbalance, correction masses and ISO 21940-11 grades against independent references.
+
+References: the two-plane formulas of ISO 21940-2 evaluated per component in
+50-digit arithmetic (mpmath), and the worked example of shared/domain/FACTS.md.
+"""
+
+import math
+from pathlib import Path
+
+import mpmath
+import numpy as np
+import pytest
+
+from cvc_balance import iso21940
+from cvc_balance.assessment import assess_balance
+from cvc_balance.engine import RotorModel
+from cvc_balance.layout import parse_layout
+from cvc_balance.layout_file import load_layout
+from cvc_balance.unbalance import couple_unbalance, plane_unbalances, static_unbalance
+
+mpmath.mp.dps = 50
+GANTRY = Path(__file__).resolve().parents[1] / 'config' / 'ct_gantry.yaml'
+
+
+def points(masses):
+    """Make a layout of point masses (m, R, theta, z)."""
+    return RotorModel.from_layout(parse_layout({
+        'name': 'points', 'supports': [{'name': 'a', 'z': -0.4},
+                                       {'name': 'b', 'z': 0.4, 'axial': True}],
+        'components': [{'name': f'p{i}', 'mass': m, 'radius': r, 'angle': t, 'z': z}
+                       for i, (m, r, t, z) in enumerate(masses)]}))
+
+
+def two_plane_reference(masses, z_i, z_ii):
+    """ISO 21940-2: U_I = sum U_i (z_II - z_i) / b, U_II = sum U_i (z_i - z_I) / b (mpmath)."""
+    b = mpmath.mpf(z_ii) - mpmath.mpf(z_i)
+    u_i = u_ii = mpmath.mpc(0)
+    for m, r, t, z in masses:
+        u = mpmath.mpf(m) * mpmath.mpf(r) * mpmath.expj(mpmath.mpf(t))
+        u_i += u * (mpmath.mpf(z_ii) - mpmath.mpf(z)) / b
+        u_ii += u * (mpmath.mpf(z) - mpmath.mpf(z_i)) / b
+    return u_i, u_ii
+
+
+@pytest.mark.parametrize('seed', range(10))
+def test_plane_unbalances_match_the_two_plane_formula(seed):
+    rng = np.random.default_rng(seed)
+    masses = [(rng.uniform(0.1, 50), rng.uniform(0, 0.8), rng.uniform(-4, 4),
+               rng.uniform(-0.5, 0.5)) for _ in range(int(rng.integers(1, 30)))]
+    z_i, z_ii = -0.3, 0.25
+    plane_1, plane_2 = plane_unbalances(points(masses), z_i, z_ii, 0.7)
+    ref_1, ref_2 = two_plane_reference(masses, z_i, z_ii)
+    size = float(sum(m * r for m, r, _, _ in masses))
+    for plane, ref in ((plane_1, ref_1), (plane_2, ref_2)):
+        assert abs(complex(*plane.vector) - complex(ref)) < 1e-13 * size
+        assert plane.correction_mass * plane.correction_radius == pytest.approx(
+            float(abs(ref)), abs=1e-13 * size)
+        correction = plane.correction_mass * plane.correction_radius * complex(
+            math.cos(plane.correction_angle), math.sin(plane.correction_angle))
+        assert abs(correction + complex(ref)) < 1e-12 * size     # U_corr = -U_plane
+
+
+def test_static_and_couple_unbalance_of_a_pure_couple():
+    """Equal and opposite m r at z = -d and +d: no static; couple 2 m r d at the +z angle."""
+    m, r, d, angle = 2.0, 0.5, 0.15, 0.7
+    model = points([(m, r, angle + math.pi, -d), (m, r, angle, d)])
+    assert math.hypot(*static_unbalance(model)) < 1e-15
+    amount = math.hypot(*couple_unbalance(model))
+    assert amount == pytest.approx(2 * m * r * d, rel=1e-14)
+    assert math.atan2(*couple_unbalance(model)[::-1]) == pytest.approx(angle, rel=1e-14)
+
+
+def test_couple_unbalance_is_taken_about_the_centre_of_mass():
+    """A static unbalance alone, off the z = 0 plane, has no couple about the centre of mass."""
+    model = points([(3.0, 0.4, 1.0, 0.3), (50.0, 0.0, 0.0, 0.3)])
+    assert math.hypot(*couple_unbalance(model)) < 1e-15
+    assert math.hypot(*static_unbalance(model)) == pytest.approx(1.2, rel=1e-15)
+
+
+@pytest.mark.parametrize('grade, kg_mm, force', [(6.3, 250.7, 158.0), (2.5, 99.5, 63.0),
+                                                 (1.0, 39.8, 25.0), (0.4, 15.9, 10.0)])
+def test_iso_21940_worked_example_1000_kg_at_240_rpm(grade, kg_mm, force):
+    omega = 240 * 2 * math.pi / 60
+    u_per = iso21940.permissible_unbalance(grade, 1000.0, omega)
+    assert u_per * 1e3 == pytest.approx(kg_mm, abs=0.05)          # kg mm, 4 figures
+    assert u_per * omega**2 == pytest.approx(force, abs=0.5)       # N = m G Omega
+    assert u_per * 1e6 == pytest.approx(9549 * grade * 1000.0 / 240, rel=1e-4)  # g mm
+
+
+def test_plane_allocation_for_a_rotor_between_bearings():
+    assert iso21940.plane_shares(0.0, -0.5, 0.5) == pytest.approx((0.5, 0.5))
+    assert iso21940.plane_shares(-0.1, -0.5, 0.5) == pytest.approx((0.6, 0.4))
+    assert iso21940.plane_shares(-0.45, -0.5, 0.5) == pytest.approx((0.7, 0.3))   # clamped
+
+
+def test_equivalent_and_finest_grade():
+    mass, omega = 1000.0, 25.0
+    u_per = iso21940.permissible_unbalance(2.5, mass, omega)
+    shares = (0.5, 0.5)
+    exact = iso21940.equivalent_grade([0.5 * u_per, 0.25 * u_per], shares, mass, omega)
+    assert exact == pytest.approx(2.5, rel=1e-14)
+    assert iso21940.finest_grade_met(exact) == 2.5
+    assert iso21940.finest_grade_met(2.6) == 6.3
+    assert iso21940.finest_grade_met(5000.0) is None
+
+
+def test_gantry_assessment_against_a_per_component_reference():
+    layout = load_layout(GANTRY)
+    assessment = assess_balance(RotorModel.from_layout(layout))
+    masses = []
+    for c in layout.components:
+        masses.append((c.mass, c.radius, c.angle, c.z))
+    z_i, z_ii = layout.balancing.planes
+    refs = two_plane_reference(masses, z_i, z_ii)   # shapes here have no own products
+    for plane, ref in zip(assessment.planes, refs):
+        assert plane.amount == pytest.approx(float(abs(ref)), rel=1e-9)
+    mass = sum(m for m, *_ in masses)
+    z_com = sum(m * z for m, _, _, z in masses) / mass
+    b = z_ii - z_i
+    shares = [min(max(s, 0.3), 0.7) for s in ((z_ii - z_com) / b, (z_com - z_i) / b)]
+    u_per = layout.balancing.grade * mass / layout.balancing.service_speed * 1e-3
+    expected = max(float(abs(r)) / (u_per * s) for r, s in zip(refs, shares)) \
+        * layout.balancing.grade
+    assert assessment.equivalent_grade == pytest.approx(expected, rel=1e-9)
+    assert assessment.within_grade == (expected <= layout.balancing.grade)
