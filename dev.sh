@@ -56,15 +56,24 @@ in_venv() {
 }
 
 colcon_check() {
-  # colcon build and a colcon test smoke run, outside the source tree.
-  local base="$here/.colcon"
-  rm -rf "$base"
-  (cd "$here" && in_venv colcon --log-base "$base/log" build --base-paths "$here" \
-      --build-base "$base/build" --install-base "$base/install" >/dev/null)
-  (cd "$here" && in_venv colcon --log-base "$base/log" test --base-paths "$here" \
-      --build-base "$base/build" --install-base "$base/install" \
-      --pytest-args -q -p no:cacheprovider -k "lint or thesis" >/dev/null)
-  in_venv colcon test-result --test-result-base "$base/build" --verbose
+  # colcon build and a colcon test smoke run (lint + thesis tests), outside the source
+  # tree; their chatter goes to a log that is shown only if something fails.
+  local base="$here/.colcon" log
+  rm -rf "$base" && mkdir -p "$base"
+  log="$base/colcon.log"
+  if ! (cd "$here" &&
+        in_venv colcon --log-base "$base/log" build --base-paths "$here" \
+          --build-base "$base/build" --install-base "$base/install" &&
+        in_venv colcon --log-base "$base/log" test --base-paths "$here" \
+          --build-base "$base/build" --install-base "$base/install" \
+          --return-code-on-test-failure \
+          --pytest-args -q -p no:cacheprovider -k "lint or thesis") >"$log" 2>&1; then
+    cat "$log" >&2
+    in_venv colcon test-result --test-result-base "$base/build" --verbose >&2 || true
+    echo "dev.sh: colcon build/test failed (log: $log)" >&2
+    return 1
+  fi
+  echo "colcon: $(in_venv colcon test-result --test-result-base "$base/build" | tail -n 1)"
 }
 
 cmd="${1:-}"

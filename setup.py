@@ -18,6 +18,7 @@ setup(
     ],
     python_requires='>=3.11',
     install_requires=['setuptools', 'numpy', 'PyYAML'],
+    extras_require={'test': ['pytest']},
     zip_safe=True,
     maintainer='cvc_balance developers',
     maintainer_email='dev@cvc-balance.invalid',
