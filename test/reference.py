@@ -57,16 +57,23 @@ def random_inertia(rng, mass):
     principal = mass / 12.0 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
     rotation = pin.utils.rpyToMatrix(*rng.uniform(-math.pi, math.pi, 3))
     tensor = rotation @ np.diag(principal) @ rotation.T
-    return {'ixx': tensor[0, 0], 'iyy': tensor[1, 1], 'izz': tensor[2, 2],
-            'ixy': tensor[0, 1], 'ixz': tensor[0, 2], 'iyz': tensor[1, 2]}
+    return {key: float(tensor[i, j]) for key, (i, j) in (
+        ('ixx', (0, 0)), ('iyy', (1, 1)), ('izz', (2, 2)), ('ixy', (0, 1)), ('ixz', (0, 2)),
+        ('iyz', (1, 2)))}
 
 
-def random_layout(rng, n=8, supports=2, tilt=True):
-    """Draw a layout mapping: n random components, 1 or 2 supports, optionally tilted gravity."""
+def random_layout(rng, n=8, supports=2, tilt=True, every_kind=False):
+    """
+    Draw a layout mapping: n random components, 1 or 2 supports, optionally tilted gravity.
+
+    ``every_kind`` puts one component of each shape kind before the n random ones.
+    """
     tilt_angle = rng.uniform(-math.radians(30), math.radians(30)) if tilt else 0.0
     layout = {
         'name': f'random_{int(rng.integers(1 << 30))}',
-        'components': [random_component(rng, i) for i in range(n)],
+        'components': ([random_component(rng, i, kind) for i, kind in enumerate(SHAPE_KINDS)]
+                       if every_kind else [])
+        + [random_component(rng, len(SHAPE_KINDS) + i) for i in range(n)],
         'gravity': [0.0, -9.80665 * math.cos(tilt_angle), 9.80665 * math.sin(tilt_angle)],
     }
     if supports == 2:
