@@ -42,18 +42,20 @@ class BalanceAssessment:
         return self.equivalent_grade <= self.grade
 
 
-def assess_balance(model, omega=None):
+def assess_balance(model, omega=None, grade=None):
     """
-    Assess ``model`` (a RotorModel) at ``omega`` rad/s (default: the layout's service speed).
+    Assess ``model`` (a RotorModel) at ``omega`` rad/s against ``grade`` (mm/s).
 
-    Raises ValueError when neither is given.
+    Defaults: the layout's service speed and grade. Raises ValueError when
+    there is no speed > 0 to judge at.
     """
     layout = model.layout
     if omega is None:
         omega = layout.balancing.service_speed
     if omega is None or not omega > 0.0:
         raise ValueError('a service speed > 0 rad/s is needed to judge the balance grade')
-    grade = layout.balancing.grade
+    if grade is None:
+        grade = layout.balancing.grade
     static = polar(*static_unbalance(model))
     couple = polar(*couple_unbalance(model))
     u_per = iso21940.permissible_unbalance(grade, model.mass, omega)

@@ -1,0 +1,343 @@
+"""
+ROS 2 node ``balance_monitor``: live bearing loads, drive torque and unbalance.
+
+A thin adapter: it turns ``joint_states`` (or ``speed``) samples and the
+``layout`` into engine calls and publishes the results from the input
+callback, with no timer in between. The per-message path is plain Python
+floats (:func:`cvc_balance.engine.sample_loads`), O(1) in the number of
+components; layout aggregates are computed once per layout.
+
+Subscriptions (relative names): ``joint_states`` (sensor_msgs/JointState,
+sensor-data QoS), ``speed`` (std_msgs/Float64, rad/s; q integrated from
+receive times), ``layout`` (std_msgs/String, YAML or JSON, transient local).
+Publications (geometry_msgs/WrenchStamped, stamp = input sample's stamp):
+``bearing_load`` and ``supports/<name>/load`` (stator frame, N and N m),
+``unbalance`` (rotor frame: force = U omega^2, torque = couple moment),
+``drive_torque`` (rotor frame, torque.z). ``/diagnostics`` at a fixed
+period: the ISO 21940-11 verdict at the current speed and the node's counts.
+"""
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+
+from cvc_balance.assessment import assess_balance
+from cvc_balance.engine import RotorModel, sample_loads
+from cvc_balance.frames import degrees, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.layout import LayoutError
+from cvc_balance.layout_file import layout_from_text, load_layout
+from cvc_balance.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.unbalance import couple_unbalance, static_unbalance
+
+LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+OUTPUT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+THROTTLE_S = 1.0
+
+PARAMETERS = (
+    # name, default, description, (min, max) for numbers
+    ('joint_name', 'gantry_joint', 'JointState joint whose position (rad) and velocity '
+     '(rad/s) are the rotor angle q and speed omega', None),
+    ('layout_file', '', 'layout file (YAML/JSON) to start with; empty: wait for one on '
+     'the layout topic', None),
+    ('stator_frame', STATOR_FRAME, 'frame_id of stator-frame outputs', None),
+    ('rotor_frame', ROTOR_FRAME, 'frame_id of rotor-frame outputs', None),
+    ('alpha_time_constant', 0.1, 'time constant (s) of the least-squares slope that '
+     'estimates alpha from omega', (1e-4, 100.0)),
+    ('balance_grade', 0.0, "ISO 21940-11 grade G (mm/s) for the diagnostics; 0: the "
+     "layout's balancing.grade", (0.0, 4000.0)),
+    ('warn_fraction', 0.8, 'WARN when the achieved grade exceeds this fraction of the '
+     'grade (ERROR beyond the grade)', (0.01, 1.0)),
+    ('max_speed', 1000.0, 'absolute speeds above this (rad/s) are rejected as absurd',
+     (1e-3, 1e5)),
+    ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
+)
+
+
+class ActiveLayout:
+    """A layout in force: its engine model and what the outputs need of it, made once."""
+
+    def __init__(self, layout, node):
+        """Aggregate ``layout`` and make the per-support publishers (raises on bad names)."""
+        self.layout = layout
+        self.model = RotorModel.from_layout(layout)
+        self.digest = layout.digest()
+        self.static = static_unbalance(self.model)
+        self.couple = couple_unbalance(self.model)
+        self.supports = tuple(
+            (s.name, node.publisher(f'supports/{s.name}/load')) for s in layout.supports)
+
+
+class BalanceMonitor(Node):
+    """Wires joint_states / speed / layout to the engine and the outputs to topics."""
+
+    def __init__(self, **kwargs):
+        """Declare parameters, topics and the diagnostics timer; load layout_file if set."""
+        super().__init__('balance_monitor', **kwargs)
+        self.params = self._declare_parameters()
+        self._wrench_publishers = {}
+        self._bearing_pub = self.publisher('bearing_load')
+        self._unbalance_pub = self.publisher('unbalance')
+        self._torque_pub = self.publisher('drive_torque')
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        stator, rotor = self.params['stator_frame'], self.params['rotor_frame']
+        self._bearing_msg = _wrench(stator)
+        self._support_msg = _wrench(stator)
+        self._unbalance_msg = _wrench(rotor)
+        self._torque_msg = _wrench(rotor)
+        self._alpha = AccelerationEstimator(self.params['alpha_time_constant'])
+        self._integrator = AngleIntegrator()
+        self._active = None
+        self._last_time = None
+        self._omega = 0.0
+        self._counts = {'accepted': 0, 'rejected': 0, 'dropped': 0}
+        self._period_accepted = 0
+        self._peak_load = 0.0
+        self._last_rejection = ''
+        self._layout_error = ''
+        if self.params['layout_file']:
+            self._apply_layout_file(self.params['layout_file'])
+        self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+                                 qos_profile_sensor_data)
+        self.create_subscription(Float64, 'speed', self._on_speed, qos_profile_sensor_data)
+        self.create_subscription(String, 'layout', self._on_layout, LAYOUT_QOS)
+        self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
+
+    def publisher(self, topic):
+        """Return the WrenchStamped publisher of ``topic``, made on first use."""
+        if topic not in self._wrench_publishers:
+            self._wrench_publishers[topic] = self.create_publisher(WrenchStamped, topic, OUTPUT_QOS)
+        return self._wrench_publishers[topic]
+
+    # -- inputs ----------------------------------------------------------------------
+
+    def _on_joint_states(self, msg):
+        try:
+            i = msg.name.index(self.params['joint_name'])
+            angle, omega = msg.position[i], msg.velocity[i]
+        except (ValueError, IndexError):
+            self._reject(f"joint_states without joint '{self.params['joint_name']}' "
+                         'or without its position and velocity')
+            return
+        stamp = msg.header.stamp
+        self._process(stamp, stamp.sec + stamp.nanosec * 1e-9, angle, omega)
+
+    def _on_speed(self, msg):
+        omega = msg.data
+        now = self.get_clock().now()
+        time = now.nanoseconds * 1e-9
+        problem = sample_problem(time, self._last_time, 0.0, omega, self.params['max_speed'])
+        if problem:
+            self._reject(f'speed: {problem}')
+            return
+        self._process(now.to_msg(), time, self._integrator.update(time, omega), omega)
+
+    def _process(self, stamp, time, angle, omega):
+        """Compute and publish the outputs of one motion sample (plain floats)."""
+        active = self._active
+        if active is None:
+            self._counts['dropped'] += 1
+            self.get_logger().warning('no layout yet: motion samples dropped',
+                                      throttle_duration_sec=THROTTLE_S)
+            return
+        problem = sample_problem(time, self._last_time, angle, omega, self.params['max_speed'])
+        if problem:
+            self._reject(f'motion sample: {problem}')
+            return
+        self._last_time = time
+        alpha = self._alpha.update(time, omega)
+        result = sample_loads(active.model, angle, omega, alpha)
+        # The total load first: it is the output latency is measured on.
+        _publish(self._bearing_pub, self._bearing_msg, stamp, result.force_stator,
+                 result.moment_stator)
+        peak = self._peak_load
+        for name, pub in active.supports:
+            force, moment = result.supports[name]
+            _publish(pub, self._support_msg, stamp, force, moment)
+            size = force[0] * force[0] + force[1] * force[1] + force[2] * force[2]
+            if size > peak:
+                peak = size
+        self._peak_load = peak
+        w2 = omega * omega
+        (u_x, u_y), (p_xz, p_yz) = active.static, active.couple
+        _publish(self._unbalance_pub, self._unbalance_msg, stamp, (w2 * u_x, w2 * u_y, 0.0),
+                 (-w2 * p_yz, w2 * p_xz, 0.0))
+        _publish(self._torque_pub, self._torque_msg, stamp, (0.0, 0.0, 0.0),
+                 (0.0, 0.0, result.drive_torque))
+        self._omega = omega
+        self._counts['accepted'] += 1
+        self._period_accepted += 1
+
+    def _reject(self, reason):
+        self._counts['rejected'] += 1
+        self._last_rejection = reason
+        self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=THROTTLE_S)
+
+    # -- layout ----------------------------------------------------------------------
+
+    def _on_layout(self, msg):
+        try:
+            layout = layout_from_text(msg.data, source='layout topic')
+        except LayoutError as error:
+            self._refuse_layout(str(error))
+            return
+        self._apply(layout, 'layout topic')
+
+    def _apply_layout_file(self, path):
+        try:
+            layout = load_layout(path)
+        except LayoutError as error:
+            self._refuse_layout(str(error))
+            return
+        self._apply(layout, path)
+
+    def _apply(self, layout, source):
+        try:
+            active = ActiveLayout(layout, self)
+        except Exception as error:  # e.g. a support name that is no valid topic name
+            self._refuse_layout(f'{source}: {error}')
+            return
+        self._active = active  # one reference swap: takes effect between two samples
+        self._layout_error = ''
+        self.get_logger().info(f"layout '{layout.name}' ({active.digest}) from {source}: "
+                               f'{len(layout.components)} components, '
+                               f'{active.model.mass:.3f} kg')
+
+    def _refuse_layout(self, reason):
+        self._layout_error = reason
+        kept = (f"'{self._active.layout.name}' stays in force" if self._active
+                else 'no layout in force')
+        self.get_logger().error(f'layout rejected ({kept}): {reason}')
+
+    # -- diagnostics -----------------------------------------------------------------
+
+    def _publish_diagnostics(self):
+        status = DiagnosticStatus(name='balance_monitor: rotor balance',
+                                  hardware_id=self.get_fully_qualified_name())
+        values = {'accepted': self._counts['accepted'], 'rejected': self._counts['rejected'],
+                  'dropped': self._counts['dropped'],
+                  'input rate [Hz]': self._period_accepted / self.params['diagnostics_period'],
+                  'peak bearing load [N]': math.sqrt(self._peak_load),
+                  'last rejected input': self._last_rejection,
+                  'last rejected layout': self._layout_error}
+        self._period_accepted, self._peak_load = 0, 0.0
+        active = self._active
+        if active is None:
+            status.level, status.message = DiagnosticStatus.WARN, 'no layout'
+        else:
+            level, message, balance = self._judge(active)
+            status.level, status.message = level, message
+            values.update(balance)
+        if self._layout_error:
+            status.message += f'; last layout rejected: {self._layout_error}'
+        status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+    def _judge(self, active):
+        layout = active.layout
+        grade = self.params['balance_grade'] or layout.balancing.grade
+        omega = abs(self._omega)
+        values = {'layout': layout.name, 'layout digest': active.digest,
+                  'speed [rad/s]': omega, 'grade [mm/s]': grade}
+        if omega <= 0.0:
+            return DiagnosticStatus.OK, 'rotor at rest: balance grade not judged', values
+        assessment = assess_balance(active.model, omega, grade)
+        values.update({'static unbalance [g mm]': assessment.static_amount * 1e6,
+                       'static unbalance angle [deg]': degrees(assessment.static_angle),
+                       'couple unbalance [g mm^2]': assessment.couple_amount * 1e6,
+                       'couple unbalance angle [deg]': degrees(assessment.couple_angle)})
+        for label, plane, allowed in zip(('I', 'II'), assessment.planes,
+                                         assessment.plane_permissible):
+            values.update({f'plane {label} z [m]': plane.z,
+                           f'plane {label} unbalance [g mm]': plane.amount * 1e6,
+                           f'plane {label} angle [deg]': degrees(plane.angle),
+                           f'plane {label} permissible [g mm]': allowed * 1e6})
+        achieved = assessment.equivalent_grade
+        values['achieved grade [mm/s]'] = achieved
+        if achieved > grade:
+            level, verdict = DiagnosticStatus.ERROR, 'out of'
+        elif achieved > self.params['warn_fraction'] * grade:
+            level, verdict = DiagnosticStatus.WARN, 'near the limit of'
+        else:
+            level, verdict = DiagnosticStatus.OK, 'within'
+        return level, f'G {achieved:.3g} at {omega:.4g} rad/s: {verdict} G {grade:g}', values
+
+    def _declare_parameters(self):
+        values = {}
+        for name, default, description, bounds in PARAMETERS:
+            descriptor = ParameterDescriptor(description=description, read_only=True)
+            if bounds is not None:
+                descriptor.type = ParameterType.PARAMETER_DOUBLE
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=bounds[0], to_value=bounds[1])]
+            values[name] = self.declare_parameter(name, default, descriptor).value
+        return values
+
+
+def _wrench(frame_id):
+    msg = WrenchStamped()
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def _publish(publisher, msg, stamp, force, torque):
+    msg.header.stamp = stamp
+    f, t = msg.wrench.force, msg.wrench.torque
+    f.x, f.y, f.z = force
+    t.x, t.y, t.z = torque
+    publisher.publish(msg)
+
+
+def _text(value):
+    return f'{value:.6g}' if isinstance(value, float) else str(value)
+
+
+def spin(node):
+    """
+    Spin ``node`` until the context shuts down (SIGINT, SIGTERM): the events executor.
+
+    rclpy's experimental EventsExecutor answers faster than the default one; its
+    spin() busy-waits holding the GIL in this rclpy (7.1), so it is driven by
+    spin_once with a timeout, which also lets the signal handlers stop it.
+    """
+    try:
+        from rclpy.experimental import EventsExecutor
+        executor = EventsExecutor(context=node.context)
+    except ImportError:  # an rclpy without it: the default executor
+        executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while rclpy.ok(context=node.context):
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+
+
+def main(args=None):
+    """Run the node until SIGINT or SIGTERM; returns the exit code."""
+    rclpy.init(args=args)
+    node = BalanceMonitor()
+    try:
+        spin(node)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
