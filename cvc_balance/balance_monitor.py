@@ -18,11 +18,13 @@ period: the ISO 21940-11 verdict at the current speed and the node's counts.
 """
 
 import math
+import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile
@@ -115,9 +117,10 @@ class BalanceMonitor(Node):
 
     def publisher(self, topic):
         """Return the WrenchStamped publisher of ``topic``, made on first use."""
-        if topic not in self._wrench_publishers:
-            self._wrench_publishers[topic] = self.create_publisher(WrenchStamped, topic, OUTPUT_QOS)
-        return self._wrench_publishers[topic]
+        publishers = self._wrench_publishers
+        if topic not in publishers:
+            publishers[topic] = self.create_publisher(WrenchStamped, topic, OUTPUT_QOS)
+        return publishers[topic]
 
     # -- inputs ----------------------------------------------------------------------
 
@@ -328,9 +331,14 @@ def spin(node):
 
 
 def main(args=None):
-    """Run the node until SIGINT or SIGTERM; returns the exit code."""
+    """Run the node until SIGINT or SIGTERM; returns the exit code (2: bad parameter)."""
     rclpy.init(args=args)
-    node = BalanceMonitor()
+    try:
+        node = BalanceMonitor()
+    except ParameterException as error:
+        print(f'balance_monitor: error: {error}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
     try:
         spin(node)
     finally:

@@ -11,7 +11,7 @@ PACKAGE = 'cvc_balance'
 
 
 def bundled_path(relative):
-    """Return the path of a bundled file, e.g. ``bundled_path('config/ct_gantry.yaml')``."""
+    """Return the path of a bundled file, such as config/ct_gantry.yaml."""
     try:
         from ament_index_python.packages import get_package_share_directory
         installed = Path(get_package_share_directory(PACKAGE)) / relative

@@ -28,7 +28,7 @@ def test_irregular_sample_times():
 
 
 def test_noise_is_suppressed_against_the_raw_difference():
-    """omega noise 0.01 rad/s at 1 kHz: raw differences ~14 rad/s^2, the estimate << 1."""
+    """Speed noise 0.01 rad/s at 1 kHz: raw differences ~14 rad/s^2, the estimate << 1."""
     rng = random.Random(1)
     sigma, dt, tau = 0.01, 1e-3, 0.1
     estimator = AccelerationEstimator(tau)

@@ -1,0 +1,111 @@
+"""
+Test harness for the node: run it as its own process, talk to it from a probe node.
+
+Each test run gets its own ROS_DOMAIN_ID (from the process id) and keeps DDS
+discovery on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+
+DOMAIN_ID = 1 + os.getpid() % 200
+
+
+def ros_environment():
+    """Return the environment for ROS processes of this test run."""
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(DOMAIN_ID), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               RCUTILS_LOGGING_BUFFERED_STREAM='0', PYTHONUNBUFFERED='1')
+    return env
+
+
+class NodeProcess:
+    """The node under test, started as ``python -m MODULE --ros-args ...``."""
+
+    def __init__(self, module, ros_args, log_path):
+        """Start it; its output goes to ``log_path``."""
+        self.log_path = log_path
+        self._log = open(log_path, 'w')
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', module, '--ros-args', *ros_args], env=ros_environment(),
+            stdout=self._log, stderr=subprocess.STDOUT)
+
+    def stop(self, sig=signal.SIGINT, timeout=10.0):
+        """Send ``sig``; return the exit code (None if it had to be killed)."""
+        if self.process.poll() is None:
+            self.process.send_signal(sig)
+            try:
+                self.process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+                self._log.close()
+                return None
+        self._log.close()
+        return self.process.returncode
+
+    def log(self):
+        """Return what the node printed so far."""
+        self._log.flush()
+        with open(self.log_path) as stream:
+            return stream.read()
+
+
+class Probe:
+    """A test-side node: publishers for the inputs, recorders for the outputs."""
+
+    def __init__(self, name='probe'):
+        """Start rclpy in its own context on this run's domain."""
+        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=DOMAIN_ID)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received = {}
+
+    def publisher(self, msg_type, topic, sensor=False, latched=False):
+        """Make a publisher: sensor-data QoS, or transient local for latched topics."""
+        if sensor:
+            qos = qos_profile_sensor_data
+        elif latched:
+            qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        else:
+            qos = QoSProfile(depth=10)
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def record(self, msg_type, topic, depth=10000):
+        """Keep every message of ``topic`` in ``self.received[topic]``."""
+        self.received[topic] = []
+        self.node.create_subscription(msg_type, topic, self.received[topic].append,
+                                      QoSProfile(depth=depth))
+        return self.received[topic]
+
+    def spin_until(self, predicate, timeout=10.0):
+        """Spin until ``predicate()`` holds; return whether it did within ``timeout`` s."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=0.01)
+        return predicate()
+
+    def spin_for(self, seconds):
+        """Spin for ``seconds``."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.005)
+
+    def close(self):
+        """Stop the probe."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
