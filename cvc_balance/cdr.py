@@ -39,3 +39,152 @@ class WrenchStampedEncoder:
     def encode(self, sec, nanosec, force, torque):
         """Return the serialized message: stamp (s, ns), force (N), torque (N m)."""
         return self._struct.pack(ENCAPSULATION_LE, sec, nanosec, self._frame, *force, *torque)
+
+
+class CdrLayout:
+    """
+    A message of fixed shape as a byte template plus the offsets of its variable fields.
+
+    Built field by field in CDR order; the template holds the constant parts
+    (encapsulation, strings, sequence lengths, zero padding) and ``fields``
+    maps a name to (offset, numpy dtype string) of each variable number, so
+    that n messages are an (n, size) byte array filled by numpy.
+    """
+
+    def __init__(self):
+        """Start with the encapsulation header."""
+        self._data = bytearray(ENCAPSULATION_LE)
+        self.fields = {}
+
+    @property
+    def size(self):
+        """Bytes of one message."""
+        return len(self._data)
+
+    @property
+    def template(self):
+        """The constant bytes of one message."""
+        return bytes(self._data)
+
+    def _align(self, alignment):
+        self._data.extend(b'\x00' * (-(len(self._data) - 4) % alignment))
+
+    def number(self, name, fmt):
+        """Add a variable number ('<i4', '<u4', '<f8') called ``name``."""
+        size = struct.calcsize(fmt[0] + {'i4': 'i', 'u4': 'I', 'f8': 'd'}[fmt[1:]])
+        self._align(size)
+        self.fields[name] = (len(self._data), fmt)
+        self._data.extend(b'\x00' * size)
+
+    def constant(self, fmt, value):
+        """Add a constant number (e.g. a sequence length)."""
+        size = struct.calcsize(fmt)
+        self._align(size)
+        self._data.extend(struct.pack(fmt, value))
+
+    def string(self, text):
+        """Add a constant string."""
+        self._align(4)
+        self._data.extend(_string_field(text))
+
+    def stamp(self):
+        """Add builtin_interfaces/Time as fields 'sec', 'nanosec'."""
+        self.number('sec', '<i4')
+        self.number('nanosec', '<u4')
+
+
+def wrench_stamped_layout(frame_id):
+    """geometry_msgs/msg/WrenchStamped: fields sec, nanosec, force_x..z, torque_x..z."""
+    layout = CdrLayout()
+    layout.stamp()
+    layout.string(frame_id)
+    for part in ('force', 'torque'):
+        for axis in 'xyz':
+            layout.number(f'{part}_{axis}', '<f8')
+    return layout
+
+
+def joint_state_layout(frame_id, names):
+    """sensor_msgs/msg/JointState with one position and velocity per joint, no effort."""
+    layout = CdrLayout()
+    layout.stamp()
+    layout.string(frame_id)
+    layout.constant('<I', len(names))
+    for name in names:
+        layout.string(name)
+    for sequence in ('position', 'velocity'):
+        layout.constant('<I', len(names))
+        for i in range(len(names)):
+            layout.number(f'{sequence}_{i}', '<f8')
+    layout.constant('<I', 0)   # effort: empty
+    return layout
+
+
+def float64_layout():
+    """std_msgs/msg/Float64: field data."""
+    layout = CdrLayout()
+    layout.number('data', '<f8')
+    return layout
+
+
+def string_message(text):
+    """std_msgs/msg/String as CDR bytes."""
+    return ENCAPSULATION_LE + _string_field(text)
+
+
+def read_string_message(data):
+    """Decode std_msgs/msg/String CDR bytes (little endian) to text."""
+    if data[:4] != ENCAPSULATION_LE:
+        raise ValueError('not little-endian CDR')
+    (length,) = struct.unpack_from('<I', data, 4)
+    if length < 1 or 8 + length > len(data):
+        raise ValueError('string length beyond the message')
+    return data[8:8 + length - 1].decode('utf-8')
+
+
+def find_joint_state_fields(data, joint):
+    """
+    Offsets of stamp, position and velocity of ``joint`` in one JointState's CDR bytes.
+
+    Returns (offsets {'sec', 'nanosec', 'position', 'velocity'}, end of the name
+    list) or None when the message lacks the joint, its position or velocity.
+    """
+    if data[:4] != ENCAPSULATION_LE:
+        raise ValueError('not little-endian CDR')
+    position = 4
+
+    def align(n):
+        nonlocal position
+        position += -(position - 4) % n
+
+    def u32():
+        nonlocal position
+        align(4)
+        (value,) = struct.unpack_from('<I', data, position)
+        position += 4
+        return value
+
+    def string():
+        nonlocal position
+        length = u32()
+        text = bytes(data[position:position + length - 1]).decode('utf-8')
+        position += length
+        return text
+
+    offsets = {'sec': 4, 'nanosec': 8}
+    position = 12
+    string()                                   # frame_id
+    names = [string() for _ in range(u32())]
+    names_end = position
+    if joint not in names:
+        return None
+    index = names.index(joint)
+    for sequence in ('position', 'velocity'):
+        count = u32()
+        if count:
+            align(8)
+        if index >= count:
+            return None
+        offsets[sequence] = position + 8 * index
+        position += 8 * count
+    return offsets, names_end
