@@ -40,12 +40,13 @@ from cvc_balance.frames import degrees, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.layout import LayoutError
 from cvc_balance.layout_file import layout_from_text, load_layout
 from cvc_balance.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.recorder import BagRecorder
 from cvc_balance.unbalance import couple_unbalance, static_unbalance
 
 LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-OUTPUT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+OUTPUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 1.0
 
 
@@ -81,6 +82,8 @@ PARAMETERS = (
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
     ('input_depth', 50, 'history depth of the best-effort joint_states and speed '
      'subscriptions', (1, 10000)),
+    ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
+     'no recording', None),
 )
 
 
@@ -131,6 +134,18 @@ class BalanceMonitor(Node):
         self.create_subscription(Float64, 'speed', self._on_speed, sensor_qos)
         self.create_subscription(String, 'layout', self._on_layout, LAYOUT_QOS)
         self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
+        self._recorder = None
+        if self.params['record_path']:
+            self._recorder = BagRecorder(self, self.params['record_path'])
+
+    def destroy_node(self):
+        """Finalise the recording, if any, then destroy the node."""
+        self.get_logger().info('motion samples: ' + ', '.join(
+            f'{count} {name}' for name, count in self._counts.items()))
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
+        return super().destroy_node()
 
     def publisher(self, topic):
         """Return the WrenchStamped publisher of ``topic``, made on first use."""

@@ -28,7 +28,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except (LayoutError, ValueError) as error:
+    except (LayoutError, ValueError, OSError) as error:
         print(f'cvc-balance: error: {error}', file=sys.stderr)
         return EXIT_BAD_INPUT
 
@@ -52,6 +52,52 @@ def _parser():
                        help="gravity in the stator frame, m/s^2 (default: the layout's)")
     solve.add_argument('--json', action='store_true', help='print one JSON object')
     solve.set_defaults(run=_solve)
+
+    simulate = commands.add_parser('simulate', help='make an input bag from a scenario',
+                                   description='Write a bag of /layout and /joint_states '
+                                   'from a scenario file (speed profile, noise, layout changes).')
+    simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
+    simulate.add_argument('-o', '--output', required=True, metavar='BAG', help='bag to write')
+    simulate.set_defaults(run=_simulate)
+
+    replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
+                                 description='Read a bag\'s motion and layouts, compute every '
+                                 'output with the vectorised engine, write them as a bag and '
+                                 'print a summary. No ROS graph needed.')
+    replay.add_argument('bag', metavar='BAG', help='input bag (.mcap)')
+    replay.add_argument('-o', '--output', metavar='OUT', help='bag of outputs to write')
+    replay.add_argument('--layout', metavar='FILE', help='use this layout for the whole run '
+                        '("what if") instead of the bag\'s')
+    replay.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
+    replay.add_argument('--alpha-time-constant', type=_finite, default=0.1, metavar='S',
+                        help='as the node\'s parameter (s)')
+    replay.add_argument('--max-speed', type=_finite, default=1000.0, metavar='W',
+                        help='as the node\'s parameter (rad/s)')
+    replay.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
+    replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
+                        help='progress bar (default: on a terminal)')
+    replay.set_defaults(run=_replay)
+
+    play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
+                               description='Publish the bag\'s layout and motion messages with '
+                               'their timing (to drive a running balance_monitor) and record '
+                               'the node\'s outputs.')
+    play.add_argument('bag', metavar='BAG')
+    play.add_argument('--rate', type=_finite, default=1.0, metavar='X',
+                      help='playback speed factor (default 1)')
+    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs to this bag')
+    play.set_defaults(run=_play)
+
+    record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
+                                 description='Record the run\'s inputs and outputs (raw CDR) '
+                                 'to a rosbag2 MCAP file; SIGINT or SIGTERM finalises it.')
+    record.add_argument('-o', '--output', required=True, metavar='BAG')
+    record.add_argument('topics', nargs='*', metavar='TOPIC',
+                        help='topics (patterns with *); default: inputs, outputs, diagnostics')
+    record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
+    record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
+                        help='ROS arguments (remapping, namespace)')
+    record.set_defaults(run=_record)
     return parser
 
 
@@ -79,6 +125,36 @@ def _solve(args):
     else:
         print(format_table(summary))
     return 0
+
+
+def _simulate(args):
+    from cvc_balance.scenario import load_scenario, write_bag
+    scenario = load_scenario(args.scenario)
+    count = write_bag(scenario, args.output)
+    print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
+          f'{len(scenario.layouts)} layouts')
+    return 0
+
+
+def _replay(args):
+    from cvc_balance.replay import format_summary, progress_bar, replay
+    show = args.progress if args.progress is not None else sys.stderr.isatty()
+    summary = replay(args.bag, args.output, args.layout, args.joint_name,
+                     args.alpha_time_constant, args.max_speed,
+                     '' if args.compression == 'none' else args.compression,
+                     progress_bar() if show else None)
+    print(format_summary(summary))
+    return 0
+
+
+def _play(args):
+    from cvc_balance.player import play_main
+    return play_main(args)
+
+
+def _record(args):
+    from cvc_balance.recorder import record_main
+    return record_main(args)
 
 
 def solve_summary(model, result, assessment, omega, alpha, q, gravity):

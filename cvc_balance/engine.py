@@ -20,29 +20,19 @@ the stator (minus the support reaction on the rotor), about O, rotor frame:
 Frames, signs and units are those of :mod:`cvc_balance.frames`. numpy only.
 """
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 import math
-import os
 
 import numpy as np
 
 from cvc_balance import inertia as shapes
 from cvc_balance.frames import products_of_inertia, tensor_from_elements, turn_xy
 from cvc_balance.inertia import place
+from cvc_balance.workers import pool
 
 CHUNK = 1 << 16
 """Samples per block in the vectorised path: the temporaries stay in cache."""
 
-_POOL = []
-
-
-def _pool():
-    """Return the worker threads of the vectorised path, one per core, made on first use."""
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 1,
-                                        thread_name_prefix='cvc_engine'))
-    return _POOL[0]
 
 
 @dataclass(frozen=True)
@@ -231,7 +221,7 @@ def loads(model, q, omega, alpha=0.0, gravity=None):
     starts = range(0, n, CHUNK)
     if len(starts) > 1:
         # numpy releases the GIL inside each call: blocks run on all cores.
-        list(_pool().map(fill, starts))
+        list(pool().map(fill, starts))
     else:
         for start in starts:
             fill(start)

@@ -11,6 +11,7 @@ indexes are packed here, with numpy.
 """
 
 from collections import defaultdict
+import struct
 import zlib
 
 from mcap.data_stream import RecordBuilder
@@ -21,10 +22,12 @@ from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
 from cvc_balance.msg_schema import schema_text
+from cvc_balance.workers import pool
 
 PROFILE = 'ros2'
 LIBRARY = 'cvc_balance'
 MESSAGE_HEADER = 31   # opcode 1, length 8, channel 2, sequence 4, log time 8, publish time 8
+_MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 _QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {durability}\n'
         '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
         '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n'
@@ -35,7 +38,8 @@ _QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {
 def _compressor(name):
     if name == 'zstd':
         import zstandard
-        return zstandard.ZstdCompressor(level=1).compress
+        # One compressor per call: they must not be shared between threads.
+        return lambda data: zstandard.ZstdCompressor(level=1).compress(data)
     if name == 'lz4':
         import lz4.frame
         return lambda data: lz4.frame.compress(data, store_size=True)
@@ -128,11 +132,8 @@ class BagWriter:
     def write(self, channel, log_time, data):
         """Add one serialized message (CDR bytes) at ``log_time`` ns."""
         self._pending_index[channel].append((log_time, len(self._pending)))
-        self._pending += (
-            np.array([(Opcode.MESSAGE, MESSAGE_HEADER - 9 + len(data), channel, 0, log_time,
-                       log_time)], dtype=[('op', 'u1'), ('len', '<u8'), ('ch', '<u2'),
-                                          ('seq', '<u4'), ('log', '<u8'), ('pub', '<u8')])
-            .tobytes())
+        self._pending += _MESSAGE_RECORD.pack(Opcode.MESSAGE, MESSAGE_HEADER - 9 + len(data),
+                                              channel, 0, log_time, log_time)
         self._pending += data
         self._counts[channel] += 1
         _extend(self._pending_times, log_time, log_time)
@@ -145,16 +146,21 @@ class BagWriter:
         log_time = np.asarray(log_time, dtype=np.uint64)
         block.set_time(log_time)
         per_chunk = max(1, self._chunk_bytes // block.group_size)
+        chunks = []
         for start in range(0, block.n, per_chunk):
             stop = min(start + per_chunk, block.n)
-            times = log_time[start:stop]
             records = block.bytes[start * block.group_size:stop * block.group_size].tobytes()
+            chunks.append((start, stop, records))
+        # Compression dominates: the chunks of a block are compressed on all cores.
+        compressed = pool().map(self._compress, [records for _, _, records in chunks])
+        for (start, stop, records), data in zip(chunks, compressed):
+            times = log_time[start:stop]
             base = np.arange(stop - start, dtype=np.uint64) * np.uint64(block.group_size)
             index = {channel: (times, base + np.uint64(offset))
                      for channel, offset in zip(block.channels, block.record_offsets)}
             for channel in block.channels:
                 self._counts[channel] += stop - start
-            self._write_chunk(records, index, int(times[0]), int(times[-1]))
+            self._write_chunk(records, index, int(times[0]), int(times[-1]), data)
 
     def close(self):
         """Write the last chunk, the summary and the footer; close the file."""
@@ -205,13 +211,13 @@ class BagWriter:
         index = {channel: (np.array([t for t, _ in entries], dtype=np.uint64),
                            np.array([o for _, o in entries], dtype=np.uint64))
                  for channel, entries in self._pending_index.items()}
-        self._write_chunk(bytes(self._pending), index, *self._pending_times)
+        records = bytes(self._pending)
+        self._write_chunk(records, index, *self._pending_times, self._compress(records))
         self._pending = bytearray()
         self._pending_index = defaultdict(list)
         self._pending_times = [None, None]
 
-    def _write_chunk(self, records, index, start_time, end_time):
-        data = self._compress(records)
+    def _write_chunk(self, records, index, start_time, end_time, data):
         chunk = Chunk(message_start_time=start_time, message_end_time=end_time,
                       uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
                       compression=self._compression, data=data)

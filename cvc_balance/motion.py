@@ -90,3 +90,77 @@ def sample_problem(time, last_time, angle, omega, max_speed):
     if last_time is not None and time <= last_time:
         return f'stamp {time:.9f} s not after the previous {last_time:.9f} s'
     return None
+
+
+def acceleration_series(time, omega, time_constant, block=None):
+    """
+    The :class:`AccelerationEstimator`'s output for whole arrays of samples, vectorised.
+
+    ``time`` (s, increasing) and ``omega`` (rad/s) are numpy arrays. Each sum
+    of the estimator is a first-order recursion s_k = exp(-dt_k / tau) s_(k-1)
+    + x_k, solved per block as exp(-(t_k - c) / tau) (carry + cumsum of
+    x_i exp((t_i - c) / tau)) about the block's first time c; blocks span at
+    most ``block`` seconds (default 10 tau) so that neither the exponentials
+    nor the translation of the moments lose digits. The slope
+    (S0 S1y - S1 Sy) / (S0 S2 - S1^2) does not depend on the time origin.
+    """
+    import numpy as np
+
+    time = np.asarray(time, dtype=float)
+    omega = np.asarray(omega, dtype=float)
+    n = len(time)
+    alpha = np.zeros(n)
+    if n == 0:
+        return alpha
+    span = 10.0 * time_constant if block is None else block
+    sums = np.zeros(5)          # S0, S1, S2, Sy, S1y about the block's origin c
+    origin = time[0]
+    start = 0
+    while start < n:
+        stop = int(np.searchsorted(time, time[start] + span, side='right'))
+        stop = max(stop, start + 1)
+        # Move the carried sums to this block's origin (older samples only).
+        shift = time[start] - origin
+        decay = np.exp(-shift / time_constant)
+        s0, s1, s2, sy, s1y = sums
+        sums = decay * np.array([s0, s1 - shift * s0, s2 - 2 * shift * s1 + shift * shift * s0,
+                                 sy, s1y - shift * sy])
+        origin = time[start]
+        u = time[start:stop] - origin
+        grow = np.exp(u / time_constant)
+        y = omega[start:stop]
+        terms = (grow, grow * u, grow * u * u, grow * y, grow * u * y)
+        shrink = 1.0 / grow
+        s0, s1, s2, sy, s1y = (shrink * (carry + np.cumsum(term))
+                               for carry, term in zip(sums, terms))
+        spread = s0 * s2 - s1 * s1
+        tt = s2 - 2 * u * s1 + u * u * s0          # the live estimator's threshold
+        ok = (spread > 1e-12 * s0 * tt) & (spread > 0.0)
+        alpha[start:stop] = np.where(ok, (s0 * s1y - s1 * sy) / np.where(ok, spread, 1.0), 0.0)
+        sums = np.array([s0[-1], s1[-1], s2[-1], sy[-1], s1y[-1]])
+        # The carried sums are now about this block's origin, at its last sample.
+        origin_time_of_sums = time[stop - 1]
+        shift_inside = origin_time_of_sums - origin
+        s0c, s1c, s2c, syc, s1yc = sums
+        sums = np.array([s0c, s1c - shift_inside * s0c,
+                         s2c - 2 * shift_inside * s1c + shift_inside ** 2 * s0c,
+                         syc, s1yc - shift_inside * syc])
+        origin = origin_time_of_sums
+        start = stop
+    return alpha
+
+
+def accepted_samples(time, angle, omega, max_speed):
+    """
+    Which samples the live node accepts, vectorised (see :func:`sample_problem`).
+
+    Finite angle and speed, |omega| <= max_speed, and a stamp after every
+    earlier accepted one (= after every earlier valid one: a valid but late
+    sample never raises the maximum). Returns a boolean array.
+    """
+    import numpy as np
+
+    valid = np.isfinite(angle) & np.isfinite(omega) & (np.abs(omega) <= max_speed)
+    latest = np.maximum.accumulate(np.where(valid, time, -np.inf))
+    before = np.concatenate([[-np.inf], latest[:-1]])
+    return valid & (time > before)

@@ -1,0 +1,138 @@
+"""
+Play a bag's inputs into the ROS graph with their timing, and record what comes back.
+
+``cvc-balance play BAG [--rate X] [-o OUT]``: layout messages go out latched
+(transient local), motion samples (joint_states or speed) as their raw bytes
+at their log times scaled by 1 / rate. After each layout the player pauses
+50 ms (bag time is then shifted) so that the node has it in force before the
+next sample. With ``-o`` the node's outputs (topics derived from the bag's
+layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
+1 s after the last input.
+"""
+
+import signal
+import subprocess
+import sys
+import time
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from cvc_balance.mcap_reader import Bag, BagError, MESSAGE_HEADER
+from cvc_balance.recorder import message_class
+
+LAYOUT_PAUSE = 0.05
+
+
+def _raw_messages(bag, channel):
+    """[(log time ns, bytes)] of a channel (uses the numpy-located records)."""
+    out = []
+    for buffer, offsets in bag.message_offsets(channel):
+        data = buffer.tobytes()
+        for offset in offsets.tolist():
+            length = int.from_bytes(data[offset + 1:offset + 9], 'little')
+            log_time = int.from_bytes(data[offset + 15:offset + 23], 'little')
+            out.append((log_time, data[offset + MESSAGE_HEADER:offset + 9 + length]))
+    return out
+
+
+def output_topics(layout_texts):
+    """Output topics of the node for the layouts a bag holds (their supports)."""
+    from cvc_balance.layout import LayoutError
+    from cvc_balance.layout_file import layout_from_text
+    topics = ['bearing_load', 'unbalance', 'drive_torque']
+    for text in layout_texts:
+        try:
+            layout = layout_from_text(text)
+        except LayoutError:
+            continue
+        for support in layout.supports:
+            topic = f'supports/{support.name}/load'
+            if topic not in topics:
+                topics.append(topic)
+    return topics
+
+
+def play(bag_path, rate=1.0, output=None, wait_for_subscriber=10.0, quiet=1.0):
+    """Publish the bag's inputs; return (messages published, recorder's report or None)."""
+    import rclpy
+    from cvc_balance.balance_monitor import input_qos
+    from cvc_balance.cdr import read_string_message
+
+    bag = Bag(bag_path)
+    for problem in bag.problems:
+        print(f'play: {bag_path}: {problem}')
+    inputs = []
+    for topic, msg_type, qos in (
+            ('joint_states', 'sensor_msgs/msg/JointState', input_qos(1000)),
+            ('speed', 'std_msgs/msg/Float64', input_qos(1000)),
+            ('layout', 'std_msgs/msg/String',
+             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL))):
+        channel = bag.channel(topic, msg_type)
+        if channel is not None:
+            inputs.append((topic, msg_type, qos, _raw_messages(bag, channel)))
+    if not any(topic in ('joint_states', 'speed') for topic, *_ in inputs):
+        raise BagError(f'{bag_path}: no joint_states or speed topic to play; the bag has: '
+                       + ', '.join(sorted(bag.topics())))
+    layouts = [data for topic, _, _, messages in inputs if topic == 'layout'
+               for _, data in messages]
+    topics = output_topics([read_string_message(data) for data in layouts])
+    rclpy.init()
+    node = rclpy.create_node('cvc_balance_player')
+    publishers = {topic: node.create_publisher(message_class(msg_type), topic, qos)
+                  for topic, msg_type, qos, _ in inputs}
+    events = sorted((log_time, topic, data) for topic, _, _, messages in inputs
+                    for log_time, data in messages)
+    # The recorder runs in its own process: its thousands of callbacks a second must not
+    # starve this one's timing (bursts would overflow the node's input queue).
+    recorder = None
+    if output:
+        recorder = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'record', '-o',
+                                     str(output), *topics], stdout=subprocess.PIPE, text=True)
+        _wait(lambda: node.count_subscribers(topics[0]) > 0, wait_for_subscriber)
+    motion = 'joint_states' if 'joint_states' in publishers else 'speed'
+    if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait_for_subscriber):
+        print(f'play: nobody subscribes to {motion}; publishing anyway')
+    published, start_wall, start_log = 0, None, events[0][0]
+    for log_time, topic, data in events:
+        if start_wall is None and topic != 'layout':
+            # Samples start once the node's outputs reach the recorder.
+            _wait(lambda: all(node.count_publishers(t) > 0 for t in topics[:1]), 5.0)
+            time.sleep(0.5)
+            start_wall = time.monotonic() - (log_time - start_log) * 1e-9 / rate
+        if start_wall is not None:
+            left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
+            if left > 0:
+                time.sleep(left)
+        publishers[topic].publish(data)
+        published += 1
+        if topic == 'layout':
+            time.sleep(LAYOUT_PAUSE)
+            if start_wall is not None:
+                start_wall += LAYOUT_PAUSE
+    report = None
+    if recorder is not None:
+        time.sleep(quiet)
+        recorder.send_signal(signal.SIGINT)
+        report = recorder.communicate(timeout=30)[0].strip()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return published, report
+
+
+def _wait(condition, timeout):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def play_main(args):
+    """Run ``cvc-balance play``; return the exit code."""
+    published, report = play(args.bag, args.rate, args.output)
+    print(f'{args.bag}: published {published} messages')
+    if report:
+        print(f'recorded {report}')
+    return 0

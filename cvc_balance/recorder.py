@@ -1,0 +1,105 @@
+"""
+Record ROS topics to a bag: raw CDR bytes straight from the subscriptions.
+
+A :class:`BagRecorder` attaches to any node: it subscribes (raw, no
+deserialisation) to the topics it is given, to topics matching a pattern as
+they appear (``supports/*/load``), and writes each message with its receive
+time as log time. Used by ``cvc-balance record``, ``cvc-balance play`` and the
+node's ``record_path`` parameter. Finalise with :meth:`close` (SIGINT/SIGTERM
+handlers do); a killed process leaves all finished chunks readable.
+"""
+
+import fnmatch
+import importlib
+
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from cvc_balance.mcap_writer import BagWriter
+
+DEFAULT_TOPICS = ('joint_states', 'speed', 'layout', 'bearing_load', 'unbalance',
+                  'drive_torque', 'supports/*/load', '/diagnostics')
+KNOWN_TYPES = {'joint_states': 'sensor_msgs/msg/JointState', 'speed': 'std_msgs/msg/Float64',
+               'layout': 'std_msgs/msg/String',
+               'diagnostics': 'diagnostic_msgs/msg/DiagnosticArray'}
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
+
+
+def message_class(msg_type):
+    """Return the Python class of 'pkg/msg/Type'."""
+    package, _, name = msg_type.split('/')
+    return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+class BagRecorder:
+    """Record topics of a node's graph to ``path`` (see the module's description)."""
+
+    def __init__(self, node, path, topics=DEFAULT_TOPICS, compression='zstd'):
+        """Subscribe ``node`` to ``topics`` (names, or patterns with '*'), write ``path``."""
+        self.node = node
+        self.writer = BagWriter(path, compression=compression)
+        self.counts = {}
+        self._patterns = []
+        self._subscribed = {}
+        for topic in topics:
+            name = node.resolve_topic_name(topic) if '*' not in topic else topic
+            if '*' in topic:
+                self._patterns.append(topic if topic.startswith('/') else
+                                      node.resolve_topic_name('x')[:-1] + topic)
+            else:
+                self._subscribe(name, KNOWN_TYPES.get(name.rsplit('/', 1)[-1], WRENCH))
+        self._timer = node.create_timer(0.2, self.discover) if self._patterns else None
+
+    def discover(self):
+        """Subscribe to topics that match the patterns and have appeared since."""
+        for name, types in self.node.get_topic_names_and_types():
+            if name not in self._subscribed and types and any(
+                    fnmatch.fnmatchcase(name, p) for p in self._patterns):
+                self._subscribe(name, types[0])
+
+    def _subscribe(self, name, msg_type):
+        short = name.rsplit('/', 1)[-1]
+        latched = short == 'layout'
+        best_effort = short in ('joint_states', 'speed')
+        channel = self.writer.add_channel(name, msg_type, latched=latched,
+                                          best_effort=best_effort)
+        qos = QoSProfile(depth=1000,
+                         reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
+                                      else ReliabilityPolicy.RELIABLE),
+                         durability=(DurabilityPolicy.TRANSIENT_LOCAL if latched
+                                     else DurabilityPolicy.VOLATILE))
+        self.counts[name] = 0
+        clock = self.node.get_clock()
+
+        def record(data):
+            self.writer.write(channel, clock.now().nanoseconds, data)
+            self.counts[name] += 1
+
+        self._subscribed[name] = self.node.create_subscription(
+            message_class(msg_type), name, record, qos, raw=True)
+
+    def close(self):
+        """Finalise the bag (summary, footer)."""
+        if self._timer is not None:
+            self._timer.cancel()
+        self.writer.close()
+
+
+def record_main(args):
+    """Run ``cvc-balance record``: record until SIGINT or SIGTERM; return the exit code."""
+    import rclpy
+    from cvc_balance.balance_monitor import spin
+
+    rclpy.init(args=['cvc_balance_record', '--ros-args', *args.ros_args])
+    node = rclpy.create_node('cvc_balance_recorder')
+    recorder = BagRecorder(node, args.output, args.topics or DEFAULT_TOPICS,
+                           '' if args.compression == 'none' else args.compression)
+    try:
+        spin(node)
+    finally:
+        recorder.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    total = sum(recorder.counts.values())
+    print(f'{args.output}: {total} messages: ' + ', '.join(
+        f'{topic} {count}' for topic, count in sorted(recorder.counts.items())))
+    return 0

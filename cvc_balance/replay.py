@@ -1,0 +1,265 @@
+"""
+Offline replay: a bag's motion and layouts through the vectorised engine, into a bag.
+
+Mirrors the live node sample for sample: the same input checks, the same
+alpha estimate (vectorised), the layout in force at each sample's log time,
+the same outputs and frames. No ROS graph is needed.
+"""
+
+from dataclasses import dataclass, field
+import math
+import sys
+import time
+
+import numpy as np
+
+from cvc_balance.assessment import assess_balance
+from cvc_balance.cdr import joint_state_layout, string_message, wrench_stamped_layout
+from cvc_balance.engine import loads, RotorModel
+from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.layout import LayoutError
+from cvc_balance.layout_file import layout_from_text
+from cvc_balance.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
+                                     MotionSamples, string_samples)
+from cvc_balance.mcap_writer import BagWriter, MessageBlock
+from cvc_balance.motion import acceleration_series, accepted_samples
+from cvc_balance.unbalance import couple_unbalance, static_unbalance
+
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+FLOAT64 = 'std_msgs/msg/Float64'
+STRING = 'std_msgs/msg/String'
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
+BLOCK = 1 << 16
+
+
+@dataclass
+class Segment:
+    """Samples computed with one layout: its name, digest and what they gave."""
+
+    layout: object
+    start_ns: int
+    samples: int = 0
+    peak_support: dict = field(default_factory=dict)
+    peak_total: float = 0.0
+    max_speed: float = 0.0
+
+
+@dataclass
+class ReplaySummary:
+    """What a replay read, computed and wrote."""
+
+    bag: str
+    samples: int = 0
+    accepted: int = 0
+    rejected: int = 0
+    dropped: int = 0
+    reasons: list = field(default_factory=list)
+    problems: list = field(default_factory=list)
+    segments: list = field(default_factory=list)
+    seconds: float = 0.0
+    output: str = ''
+
+
+def read_inputs(bag, joint_name):
+    """
+    Motion samples and layout messages of a bag: (MotionSamples-like tuple, layouts, source).
+
+    joint_states (sensor_msgs/JointState) is used if present, else speed
+    (std_msgs/Float64, angle integrated over log times as the node does over
+    receive times). Raises BagError when the bag has neither.
+    """
+    joints = bag.channel('joint_states', JOINT_STATE)
+    speed = bag.channel('speed', FLOAT64)
+    if joints is not None:
+        motion = joint_samples(bag, joints, joint_name)
+        source = joints.topic
+    elif speed is not None:
+        log_time, omega = float64_samples(bag, speed)
+        t = log_time * 1e-9
+        steps = np.concatenate([[0.0], 0.5 * (omega[1:] + omega[:-1]) * np.diff(t)])
+        angle = np.remainder(np.cumsum(steps) + math.pi, 2 * math.pi) - math.pi
+        motion = MotionSamples(log_time, log_time, angle, omega)
+        source = speed.topic
+    else:
+        topics = ', '.join(f'{t} ({m})' for t, m in sorted(bag.topics().items())) or 'none'
+        raise BagError(f'{bag.path}: no joint_states ({JOINT_STATE}) or speed ({FLOAT64}) '
+                       f'topic; the bag has: {topics}')
+    layout_channel = bag.channel('layout', STRING)
+    layouts = string_samples(bag, layout_channel) if layout_channel is not None else []
+    return motion, layouts, source
+
+
+def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
+           time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None):
+    """Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary."""
+    started = time.perf_counter()
+    bag = Bag(bag_path)
+    summary = ReplaySummary(str(bag_path))
+    motion, layout_messages, source = read_inputs(bag, joint_name)
+    summary.samples = len(motion.stamp) + motion.rejected
+    summary.reasons = list(motion.reasons)
+    if layout_file is not None:
+        from cvc_balance.layout_file import load_layout
+        events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
+    else:
+        events = []
+        for log_time, text in layout_messages:
+            try:
+                events.append((log_time, layout_from_text(text, source='layout message')))
+            except LayoutError as error:
+                summary.problems.append(f'layout at {log_time * 1e-9:.3f} s rejected '
+                                        f'(previous stays in force): {error}')
+    if not events:
+        raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
+                       'give one with --layout')
+    t = motion.stamp * 1e-9
+    accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
+    summary.rejected = motion.rejected + int((~accepted).sum())
+    if (~accepted).any() and len(summary.reasons) < 5:
+        summary.reasons.append('motion samples not finite, beyond max_speed or not after the '
+                               'previous stamp')
+    first_layout = events[0][0]
+    in_time = motion.log_time >= first_layout
+    summary.dropped = int((accepted & ~in_time).sum())
+    use = accepted & in_time
+    stamp, log_time = motion.stamp[use], motion.log_time[use]
+    angle, omega = motion.angle[use], motion.omega[use]
+    # alpha runs over every accepted sample, as in the node (also those before a layout).
+    alpha_all = acceleration_series(t[accepted], motion.omega[accepted], time_constant)
+    alpha = alpha_all[in_time[accepted]]
+    summary.accepted = int(use.sum())
+    writer = BagWriter(output, compression=compression) if output else None
+    channels = _output_channels(writer, source) if writer else None
+    if writer:
+        for log, layout in events:
+            writer.write(channels['layout'], max(int(log), 0), string_message(
+                _layout_text(layout_messages, log, layout_file)))
+    bounds = [e[0] for e in events[1:]] + [np.iinfo(np.int64).max]
+    done = 0
+    for (start_ns, layout), end_ns in zip(events, bounds):
+        model = RotorModel.from_layout(layout)
+        segment = Segment(layout, int(start_ns))
+        summary.segments.append(segment)
+        lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
+        for a in range(lo, hi, BLOCK):
+            b = min(a + BLOCK, hi)
+            result = loads(model, angle[a:b], omega[a:b], alpha[a:b])
+            _account(segment, model, result, omega[a:b])
+            if writer:
+                _write_block(writer, channels, model, result, stamp[a:b], log_time[a:b],
+                             angle[a:b], omega[a:b], joint_name)
+            done += b - a
+            if progress:
+                progress(done, len(stamp))
+    if writer:
+        writer.close()
+        summary.output = str(output)
+    summary.problems = bag.problems + summary.problems
+    summary.seconds = time.perf_counter() - started
+    return summary
+
+
+def _layout_text(messages, log_time, layout_file):
+    if layout_file is not None:
+        with open(layout_file, encoding='utf-8') as stream:
+            return stream.read()
+    return next(text for t, text in messages if t == log_time)
+
+
+def _output_channels(writer, source):
+    return {'layout': writer.add_channel('/layout', STRING, latched=True),
+            'joint_states': writer.add_channel(source, JOINT_STATE, best_effort=True),
+            'bearing_load': writer.add_channel('/bearing_load', WRENCH),
+            'unbalance': writer.add_channel('/unbalance', WRENCH),
+            'drive_torque': writer.add_channel('/drive_torque', WRENCH),
+            'supports': {}}
+
+
+def _write_block(writer, channels, model, result, stamp, log_time, angle, omega, joint):
+    supports = channels['supports']
+    for s in model.supports:
+        if s.name not in supports:
+            supports[s.name] = writer.add_channel(f'/supports/{s.name}/load', WRENCH)
+    stator, rotor = wrench_stamped_layout(STATOR_FRAME), wrench_stamped_layout(ROTOR_FRAME)
+    parts = [(channels['joint_states'], joint_state_layout('', [joint])),
+             (channels['bearing_load'], stator)]
+    parts += [(supports[s.name], stator) for s in model.supports]
+    parts += [(channels['unbalance'], rotor), (channels['drive_torque'], rotor)]
+    n = len(stamp)
+    block = MessageBlock(parts, n)
+    array = block.array
+    sec, nanosec = np.divmod(stamp, 1_000_000_000)
+    for g in range(len(parts)):
+        array[f'{g}.sec'], array[f'{g}.nanosec'] = sec, nanosec
+    array['0.position_0'], array['0.velocity_0'] = angle, omega
+    wrenches = [(result.force_stator, result.moment_stator)]
+    wrenches += [(result.support_force[s.name], result.support_moment[s.name])
+                 for s in model.supports]
+    w2 = omega * omega
+    (u_x, u_y), (p_xz, p_yz) = static_unbalance(model), couple_unbalance(model)
+    zero = np.zeros(n)
+    wrenches.append((np.stack([w2 * u_x, w2 * u_y, zero], 1),
+                     np.stack([-w2 * p_yz, w2 * p_xz, zero], 1)))
+    wrenches.append((np.zeros((n, 3)), np.stack([zero, zero, result.drive_torque], 1)))
+    for g, (force, torque) in enumerate(wrenches, start=1):
+        for i, axis in enumerate('xyz'):
+            array[f'{g}.force_{axis}'] = force[:, i]
+            array[f'{g}.torque_{axis}'] = torque[:, i]
+    writer.write_block(block, log_time)
+
+
+def _account(segment, model, result, omega):
+    segment.samples += len(omega)
+    if len(omega):
+        segment.max_speed = max(segment.max_speed, float(np.abs(omega).max()))
+        segment.peak_total = max(segment.peak_total,
+                                 float(np.linalg.norm(result.force_stator, axis=1).max()))
+    for s in model.supports:
+        peak = float(np.linalg.norm(result.support_force[s.name], axis=1).max()) \
+            if len(omega) else 0.0
+        segment.peak_support[s.name] = max(segment.peak_support.get(s.name, 0.0), peak)
+
+
+def format_summary(summary):
+    """Describe a replay for people (SI; degrees and g mm where people read them)."""
+    lines = [f'bag {summary.bag}: {summary.samples} motion samples, {summary.accepted} used, '
+             f'{summary.rejected} rejected, {summary.dropped} before any layout']
+    lines += [f'  rejected: {r}' for r in summary.reasons]
+    lines += [f'  problem: {p}' for p in summary.problems]
+    for segment in summary.segments:
+        layout = segment.layout
+        model = RotorModel.from_layout(layout)
+        lines.append(f"layout '{layout.name}' ({layout.digest()}) from "
+                     f'{max(segment.start_ns, 0) * 1e-9:.3f} s: {segment.samples} samples, '
+                     f'top speed {segment.max_speed:.4g} rad/s')
+        lines.append(f'  peak load on the stator {segment.peak_total:.1f} N; per support: '
+                     + ', '.join(f'{name} {peak:.1f} N'
+                                 for name, peak in segment.peak_support.items()))
+        speed = layout.balancing.service_speed or segment.max_speed
+        if speed > 0.0:
+            a = assess_balance(model, speed)
+            planes = '; '.join(f'plane {label} (z {p.z:.3f} m) {p.amount * 1e6:.1f} g mm at '
+                               f'{math.degrees(p.angle):.1f} deg'
+                               for label, p in zip(('I', 'II'), a.planes)) or \
+                f'static {a.static_amount * 1e6:.1f} g mm'
+            verdict = 'WITHIN' if a.within_grade else 'OUT OF'
+            lines.append(f'  unbalance: {planes}; achieved G {a.equivalent_grade:.3g} at '
+                         f'{speed:.4g} rad/s -> {verdict} G {a.grade:g}')
+    rate = summary.accepted / summary.seconds if summary.seconds else 0.0
+    lines.append(f'{summary.accepted} samples in {summary.seconds:.3f} s '
+                 f'({rate / 1e6:.3f} M samples/s, read + compute'
+                 f'{" + write" if summary.output else ""})'
+                 + (f'; wrote {summary.output}' if summary.output else ''))
+    return '\n'.join(lines)
+
+
+def progress_bar(stream=sys.stderr, width=30):
+    """Return a progress callback drawing a bar on ``stream`` (a terminal)."""
+    def show(done, total):
+        filled = int(width * done / max(total, 1))
+        stream.write(f'\rreplay [{"#" * filled}{"." * (width - filled)}] '
+                     f'{100 * done / max(total, 1):5.1f} %')
+        if done >= total:
+            stream.write('\n')
+        stream.flush()
+    return show
