@@ -48,6 +48,7 @@ LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 OUTPUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 1.0
+WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
 
 
 def input_qos(depth):
@@ -135,13 +136,20 @@ class BalanceMonitor(Node):
         self.create_subscription(String, 'layout', self._on_layout, LAYOUT_QOS)
         self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
         self._recorder = None
+        self._record = {}
         if self.params['record_path']:
-            self._recorder = BagRecorder(self, self.params['record_path'])
+            # Inputs and diagnostics through raw subscriptions; the outputs are written as
+            # they are published (no second trip through DDS).
+            self._recorder = BagRecorder(self, self.params['record_path'],
+                                         ('joint_states', 'speed', 'layout', '/diagnostics'))
+            for topic in ('bearing_load', 'unbalance', 'drive_torque'):
+                self._record[topic] = self._recorder.add(topic, WRENCH_TYPE)
 
     def destroy_node(self):
         """Finalise the recording, if any, then destroy the node."""
-        self.get_logger().info('motion samples: ' + ', '.join(
-            f'{count} {name}' for name, count in self._counts.items()))
+        # print: rosout is gone once a signal has shut the context down.
+        print('balance_monitor: motion samples: ' + ', '.join(
+            f'{count} {name}' for name, count in self._counts.items()), flush=True)
         if self._recorder is not None:
             self._recorder.close()
             self._recorder = None
@@ -195,25 +203,42 @@ class BalanceMonitor(Node):
         result = sample_loads(active.model, angle, omega, alpha)
         stator, rotor = self._stator_cdr.encode, self._rotor_cdr.encode
         # The total load first: it is the output latency is measured on.
-        self._bearing_pub.publish(stator(sec, nanosec, result.force_stator,
-                                         result.moment_stator))
+        bearing = stator(sec, nanosec, result.force_stator, result.moment_stator)
+        self._bearing_pub.publish(bearing)
         peak = self._peak_load
+        supports = []
         for name, pub in active.supports:
             force, moment = result.supports[name]
-            pub.publish(stator(sec, nanosec, force, moment))
+            data = stator(sec, nanosec, force, moment)
+            pub.publish(data)
+            supports.append((name, data))
             size = force[0] * force[0] + force[1] * force[1] + force[2] * force[2]
             if size > peak:
                 peak = size
         self._peak_load = peak
         w2 = omega * omega
         (u_x, u_y), (p_xz, p_yz) = active.static, active.couple
-        self._unbalance_pub.publish(rotor(sec, nanosec, (w2 * u_x, w2 * u_y, 0.0),
-                                          (-w2 * p_yz, w2 * p_xz, 0.0)))
-        self._torque_pub.publish(rotor(sec, nanosec, (0.0, 0.0, 0.0),
-                                       (0.0, 0.0, result.drive_torque)))
+        unbalance = rotor(sec, nanosec, (w2 * u_x, w2 * u_y, 0.0), (-w2 * p_yz, w2 * p_xz, 0.0))
+        self._unbalance_pub.publish(unbalance)
+        torque = rotor(sec, nanosec, (0.0, 0.0, 0.0), (0.0, 0.0, result.drive_torque))
+        self._torque_pub.publish(torque)
+        if self._record:
+            self._record_outputs(bearing, supports, unbalance, torque)
         self._omega = omega
         self._counts['accepted'] += 1
         self._period_accepted += 1
+
+    def _record_outputs(self, bearing, supports, unbalance, torque):
+        now = self.get_clock().now().nanoseconds
+        record = self._record
+        record['bearing_load'](now, bearing)
+        for name, data in supports:
+            topic = f'supports/{name}/load'
+            if topic not in record:
+                record[topic] = self._recorder.add(topic, WRENCH_TYPE)
+            record[topic](now, data)
+        record['unbalance'](now, unbalance)
+        record['drive_torque'](now, torque)
 
     def _reject(self, reason):
         self._counts['rejected'] += 1

@@ -95,6 +95,10 @@ def _parser():
     record.add_argument('topics', nargs='*', metavar='TOPIC',
                         help='topics (patterns with *); default: inputs, outputs, diagnostics')
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
+    record.add_argument('--chunk-kib', type=int, default=1024, metavar='K',
+                        help='chunk size; a killed recorder loses at most one chunk')
+    record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
+                        help='print "ready" once this topic\'s publisher is matched')
     record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
                         help='ROS arguments (remapping, namespace)')
     record.set_defaults(run=_record)

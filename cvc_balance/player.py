@@ -7,7 +7,9 @@ at their log times scaled by 1 / rate. After each layout the player pauses
 50 ms (bag time is then shifted) so that the node has it in force before the
 next sample. With ``-o`` the node's outputs (topics derived from the bag's
 layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
-1 s after the last input.
+1 s after the last input. Samples start once the node subscribes to them, the
+recorder has matched the node's outputs, and 1.5 s more (DDS discovery is
+one-sided: the other end may match a moment later).
 """
 
 import signal
@@ -52,7 +54,7 @@ def output_topics(layout_texts):
     return topics
 
 
-def play(bag_path, rate=1.0, output=None, wait_for_subscriber=10.0, quiet=1.0):
+def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5):
     """Publish the bag's inputs; return (messages published, recorder's report or None)."""
     import rclpy
     from cvc_balance.balance_monitor import input_qos
@@ -88,28 +90,31 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=10.0, quiet=1.0):
     recorder = None
     if output:
         recorder = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'record', '-o',
-                                     str(output), *topics], stdout=subprocess.PIPE, text=True)
-        _wait(lambda: node.count_subscribers(topics[0]) > 0, wait_for_subscriber)
+                                     str(output), '--ready-when', topics[0], *topics],
+                                    stdout=subprocess.PIPE, text=True)
     motion = 'joint_states' if 'joint_states' in publishers else 'speed'
     if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait_for_subscriber):
         print(f'play: nobody subscribes to {motion}; publishing anyway')
-    published, start_wall, start_log = 0, None, events[0][0]
-    for log_time, topic, data in events:
-        if start_wall is None and topic != 'layout':
-            # Samples start once the node's outputs reach the recorder.
-            _wait(lambda: all(node.count_publishers(t) > 0 for t in topics[:1]), 5.0)
-            time.sleep(0.5)
-            start_wall = time.monotonic() - (log_time - start_log) * 1e-9 / rate
-        if start_wall is not None:
-            left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
-            if left > 0:
-                time.sleep(left)
+    first_sample = next(i for i, (_, topic, _) in enumerate(events) if topic != 'layout')
+    for log_time, topic, data in events[:first_sample]:
+        publishers[topic].publish(data)          # the layouts in force from the start
+    if recorder is not None and recorder.stdout.readline().strip() != 'ready':
+        print('play: the recorder did not get ready; recording anyway')
+    if first_sample and topics[3:]:
+        _wait(lambda: node.count_publishers(topics[3]) > 0, wait_for_subscriber)
+    # DDS matching is one-sided: what this side sees, the other may see a moment later.
+    time.sleep(settle)
+    published, start_log = first_sample, events[first_sample][0]
+    start_wall = time.monotonic()
+    for log_time, topic, data in events[first_sample:]:
+        left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
+        if left > 0:
+            time.sleep(left)
         publishers[topic].publish(data)
         published += 1
         if topic == 'layout':
             time.sleep(LAYOUT_PAUSE)
-            if start_wall is not None:
-                start_wall += LAYOUT_PAUSE
+            start_wall += LAYOUT_PAUSE
     report = None
     if recorder is not None:
         time.sleep(quiet)

@@ -33,10 +33,11 @@ def message_class(msg_type):
 class BagRecorder:
     """Record topics of a node's graph to ``path`` (see the module's description)."""
 
-    def __init__(self, node, path, topics=DEFAULT_TOPICS, compression='zstd'):
+    def __init__(self, node, path, topics=DEFAULT_TOPICS, compression='zstd',
+                 chunk_bytes=1 << 20):
         """Subscribe ``node`` to ``topics`` (names, or patterns with '*'), write ``path``."""
         self.node = node
-        self.writer = BagWriter(path, compression=compression)
+        self.writer = BagWriter(path, compression=compression, chunk_bytes=chunk_bytes)
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
@@ -55,6 +56,21 @@ class BagRecorder:
             if name not in self._subscribed and types and any(
                     fnmatch.fnmatchcase(name, p) for p in self._patterns):
                 self._subscribe(name, types[0])
+
+    def subscription(self, name):
+        """Return the subscription of a recorded topic (None if not subscribed)."""
+        return self._subscribed.get(name)
+
+    def add(self, topic, msg_type):
+        """Return a function(log_time_ns, data) writing messages the node itself makes."""
+        name = self.node.resolve_topic_name(topic)
+        channel = self.writer.add_channel(name, msg_type)
+        self.counts[name] = 0
+
+        def write(log_time, data):
+            self.writer.write(channel, log_time, data)
+            self.counts[name] += 1
+        return write
 
     def _subscribe(self, name, msg_type):
         short = name.rsplit('/', 1)[-1]
@@ -92,7 +108,17 @@ def record_main(args):
     rclpy.init(args=['cvc_balance_record', '--ros-args', *args.ros_args])
     node = rclpy.create_node('cvc_balance_recorder')
     recorder = BagRecorder(node, args.output, args.topics or DEFAULT_TOPICS,
-                           '' if args.compression == 'none' else args.compression)
+                           '' if args.compression == 'none' else args.compression,
+                           args.chunk_kib * 1024)
+    if args.ready_when:
+        # Say 'ready' once the subscriptions have matched a publisher (reader side).
+        wanted = [recorder.subscription(node.resolve_topic_name(t)) for t in args.ready_when]
+
+        def check():
+            if all(s is not None and s.get_publisher_count() > 0 for s in wanted):
+                print('ready', flush=True)
+                timer.cancel()
+        timer = node.create_timer(0.05, check)
     try:
         spin(node)
     finally:

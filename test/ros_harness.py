@@ -53,7 +53,8 @@ class NodeProcess:
 
     def log(self):
         """Return what the node printed so far."""
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         with open(self.log_path) as stream:
             return stream.read()
 
