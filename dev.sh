@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # cvc_balance developer entry point: sets up .venv on first use, then runs a job.
-#   ./dev.sh demo      the main job on the bundled defaults
+#   ./dev.sh demo      the main job: a bundled bag replayed live through the node, recorded
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
@@ -76,13 +76,31 @@ colcon_check() {
   echo "colcon: $(in_venv colcon test-result --test-result-base "$base/build" | tail -n 1)"
 }
 
+demo() {
+  # The balance_monitor node on this machine's ROS graph (discovery kept on localhost),
+  # a bundled bag played into it live, its outputs recorded, then the offline replay's
+  # summary of the same bag.
+  local bag="$here/bags/spin_up_tube_swap.mcap" out="$here/runs/spin_up_tube_swap_live.mcap"
+  mkdir -p "$here/runs"
+  export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-42}" ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+  # exec: $! is then the node itself; SIGTERM, since background jobs ignore SIGINT.
+  in_venv exec balance-monitor --ros-args --params-file "$here/config/balance_monitor.yaml" &
+  local node=$!
+  trap 'kill -TERM $node 2>/dev/null; wait $node 2>/dev/null' EXIT
+  in_venv cvc-balance play "$bag" -o "$out"
+  kill -TERM $node && wait $node
+  trap - EXIT
+  echo
+  in_venv cvc-balance replay "$bag"
+}
+
 cmd="${1:-}"
 shift || true
 case "$cmd" in
   setup) setup ;;
   demo)
     setup
-    in_venv cvc-balance solve "$here/config/ct_gantry.yaml" --omega 23.27 "$@" ;;
+    demo ;;
   test)
     setup
     colcon_check

@@ -3,21 +3,24 @@ rosbag2-style MCAP files: profile ros2, ros2msg schemas, CDR messages, chunked.
 
 Two ways in: :meth:`BagWriter.write` takes one serialized message (live
 recording), :meth:`BagWriter.write_block` takes n samples of fixed-layout
-messages built as one numpy array (offline replay, simulation). Each finished
-chunk is written and flushed with its message indexes at once, so a process
-killed at any moment loses at most the chunk it was filling. The framing
+messages built as one numpy array (offline replay, simulation). Chunks are
+compressed on the worker threads and written in order by one I/O thread,
+each with its message indexes and flushed at once, so a process killed at
+any moment loses at most the chunks not yet written (the one being filled
+and those in flight). The framing
 records come from the ``mcap`` package; only message records and message
 indexes are packed here, with numpy.
 """
 
-from collections import defaultdict
+from collections import defaultdict, deque
+from concurrent.futures import ThreadPoolExecutor
 import struct
 import zlib
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
-                          Statistics, SummaryOffset)
+from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Schema, Statistics,
+                          SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
@@ -85,12 +88,23 @@ class MessageBlock:
         self.array = self.bytes.view(np.dtype({'names': names, 'formats': formats,
                                                'offsets': offsets,
                                                'itemsize': self.group_size}))
+        self.fields = {name: self.array[name] for name in names}   # views, made once
+        self._offsets = {}
 
-    def set_time(self, log_time):
-        """Set log and publish time (ns) of every message of each sample."""
+    def record_offsets_for(self, count):
+        """{channel: offsets of its records} within a chunk of ``count`` samples (cached)."""
+        if count not in self._offsets:
+            base = np.arange(count, dtype=np.uint64) * np.uint64(self.group_size)
+            self._offsets[count] = {channel: base + np.uint64(offset) for channel, offset
+                                    in zip(self.channels, self.record_offsets)}
+        return self._offsets[count]
+
+    def set_time(self, log_time, count=None):
+        """Set log and publish time (ns) of every message of the first ``count`` samples."""
+        count = self.n if count is None else count
         for g in range(len(self.channels)):
-            self.array[f'{g}.log'] = log_time
-            self.array[f'{g}.pub'] = log_time
+            self.fields[f'{g}.log'][:count] = log_time[:count]
+            self.fields[f'{g}.pub'][:count] = log_time[:count]
 
 
 class BagWriter:
@@ -110,6 +124,8 @@ class BagWriter:
         self._pending = bytearray()
         self._pending_index = defaultdict(list)
         self._pending_times = [None, None]
+        self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bag_writer')
+        self._io_jobs = deque()
         self._stream.write(MCAP0_MAGIC)
         self._emit(Header(profile=PROFILE, library=LIBRARY))
         self._closed = False
@@ -140,33 +156,37 @@ class BagWriter:
         if len(self._pending) >= self._chunk_bytes:
             self._flush_pending()
 
-    def write_block(self, block, log_time):
-        """Add a :class:`MessageBlock`; ``log_time`` (n,) ns, non-decreasing, is set on it."""
+    def write_block(self, block, log_time, count=None):
+        """
+        Add the first ``count`` samples of a :class:`MessageBlock` (default all).
+
+        ``log_time`` (count,) ns, non-decreasing, is set on the block. The bytes
+        are copied: the block can be refilled as soon as this returns, while
+        its chunks are compressed on the worker threads and written in order by
+        the writer's I/O thread.
+        """
         self._flush_pending()
+        count = block.n if count is None else count
         log_time = np.asarray(log_time, dtype=np.uint64)
-        block.set_time(log_time)
+        block.set_time(log_time, count)
         per_chunk = max(1, self._chunk_bytes // block.group_size)
-        chunks = []
-        for start in range(0, block.n, per_chunk):
-            stop = min(start + per_chunk, block.n)
+        for start in range(0, count, per_chunk):
+            stop = min(start + per_chunk, count)
             records = block.bytes[start * block.group_size:stop * block.group_size].tobytes()
-            chunks.append((start, stop, records))
-        # Compression dominates: the chunks of a block are compressed on all cores.
-        compressed = pool().map(self._compress, [records for _, _, records in chunks])
-        for (start, stop, records), data in zip(chunks, compressed):
             times = log_time[start:stop]
-            base = np.arange(stop - start, dtype=np.uint64) * np.uint64(block.group_size)
-            index = {channel: (times, base + np.uint64(offset))
-                     for channel, offset in zip(block.channels, block.record_offsets)}
+            index = {channel: (times, offsets)
+                     for channel, offsets in block.record_offsets_for(stop - start).items()}
             for channel in block.channels:
                 self._counts[channel] += stop - start
-            self._write_chunk(records, index, int(times[0]), int(times[-1]), data)
+            self._submit(records, index, int(times[0]), int(times[-1]))
 
     def close(self):
         """Write the last chunk, the summary and the footer; close the file."""
         if self._closed:
             return
         self._flush_pending()
+        self._wait_for_io()
+        self._io.shutdown()
         self._emit(DataEnd(data_section_crc=0))
         summary_start = self._stream.tell()
         summary, offsets = RecordBuilder(), []
@@ -211,21 +231,39 @@ class BagWriter:
         index = {channel: (np.array([t for t, _ in entries], dtype=np.uint64),
                            np.array([o for _, o in entries], dtype=np.uint64))
                  for channel, entries in self._pending_index.items()}
-        records = bytes(self._pending)
-        self._write_chunk(records, index, *self._pending_times, self._compress(records))
+        self._submit(bytes(self._pending), index, *self._pending_times)
         self._pending = bytearray()
         self._pending_index = defaultdict(list)
         self._pending_times = [None, None]
 
-    def _write_chunk(self, records, index, start_time, end_time, data):
-        chunk = Chunk(message_start_time=start_time, message_end_time=end_time,
-                      uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
-                      compression=self._compression, data=data)
+    def _submit(self, records, index, start_time, end_time):
+        """Compress a chunk on a worker thread; write it, in order, on the I/O thread."""
+        packed = pool().submit(self._pack, records)
+        self._io_jobs.append(self._io.submit(self._write_chunk, packed, records, index,
+                                             start_time, end_time))
+        while len(self._io_jobs) > 32:          # bound the memory held by chunks in flight
+            self._io_jobs.popleft().result()
+
+    def _pack(self, records):
+        return self._compress(records), zlib.crc32(records)
+
+    def _wait_for_io(self):
+        while self._io_jobs:
+            self._io_jobs.popleft().result()
+
+    def _write_chunk(self, packed, records, index, start_time, end_time):
+        data, crc = packed.result()
+        # The Chunk record, framed here so that its megabyte of data is written once,
+        # not copied through mcap's RecordBuilder.
+        compression = self._compression.encode()
+        header = struct.pack(f'<BQQQQII{len(compression)}sQ', Opcode.CHUNK,
+                             8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(data), start_time,
+                             end_time, len(records), crc, len(compression), compression,
+                             len(data))
         chunk_start = self._stream.tell()
-        builder = RecordBuilder()
-        chunk.write(builder)
-        chunk_bytes = builder.end()
-        self._stream.write(chunk_bytes)
+        self._stream.write(header)
+        self._stream.write(data)
+        chunk_length = len(header) + len(data)
         index_start = self._stream.tell()
         index_offsets, parts = {}, []
         position = index_start
@@ -245,7 +283,7 @@ class BagWriter:
         _extend(self._times, start_time, end_time)
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start_time, message_end_time=end_time,
-            chunk_start_offset=chunk_start, chunk_length=len(chunk_bytes),
+            chunk_start_offset=chunk_start, chunk_length=chunk_length,
             message_index_offsets=index_offsets, message_index_length=position - index_start,
             compression=self._compression, compressed_size=len(data),
             uncompressed_size=len(records)))

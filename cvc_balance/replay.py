@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from cvc_balance.assessment import assess_balance
-from cvc_balance.cdr import joint_state_layout, string_message, wrench_stamped_layout
+from cvc_balance.cdr import string_message, wrench_stamped_layout
 from cvc_balance.engine import loads, RotorModel
 from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.layout import LayoutError
@@ -30,6 +30,8 @@ FLOAT64 = 'std_msgs/msg/Float64'
 STRING = 'std_msgs/msg/String'
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 BLOCK = 1 << 16
+SUB = 1 << 14
+"""Samples per message block filled at once: its bytes stay in cache."""
 
 
 @dataclass
@@ -62,7 +64,7 @@ class ReplaySummary:
 
 def read_inputs(bag, joint_name):
     """
-    Motion samples and layout messages of a bag: (MotionSamples-like tuple, layouts, source).
+    Motion samples and layout messages of a bag: (MotionSamples, [(log time, text)]).
 
     joint_states (sensor_msgs/JointState) is used if present, else speed
     (std_msgs/Float64, angle integrated over log times as the node does over
@@ -72,21 +74,19 @@ def read_inputs(bag, joint_name):
     speed = bag.channel('speed', FLOAT64)
     if joints is not None:
         motion = joint_samples(bag, joints, joint_name)
-        source = joints.topic
     elif speed is not None:
         log_time, omega = float64_samples(bag, speed)
         t = log_time * 1e-9
         steps = np.concatenate([[0.0], 0.5 * (omega[1:] + omega[:-1]) * np.diff(t)])
         angle = np.remainder(np.cumsum(steps) + math.pi, 2 * math.pi) - math.pi
         motion = MotionSamples(log_time, log_time, angle, omega)
-        source = speed.topic
     else:
         topics = ', '.join(f'{t} ({m})' for t, m in sorted(bag.topics().items())) or 'none'
         raise BagError(f'{bag.path}: no joint_states ({JOINT_STATE}) or speed ({FLOAT64}) '
                        f'topic; the bag has: {topics}')
     layout_channel = bag.channel('layout', STRING)
     layouts = string_samples(bag, layout_channel) if layout_channel is not None else []
-    return motion, layouts, source
+    return motion, layouts
 
 
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
@@ -95,7 +95,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     started = time.perf_counter()
     bag = Bag(bag_path)
     summary = ReplaySummary(str(bag_path))
-    motion, layout_messages, source = read_inputs(bag, joint_name)
+    motion, layout_messages = read_inputs(bag, joint_name)
     summary.samples = len(motion.stamp) + motion.rejected
     summary.reasons = list(motion.reasons)
     if layout_file is not None:
@@ -129,7 +129,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     alpha = alpha_all[in_time[accepted]]
     summary.accepted = int(use.sum())
     writer = BagWriter(output, compression=compression) if output else None
-    channels = _output_channels(writer, source) if writer else None
+    channels = _output_channels(writer) if writer else None
     if writer:
         for log, layout in events:
             writer.write(channels['layout'], max(int(log), 0), string_message(
@@ -140,14 +140,14 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         model = RotorModel.from_layout(layout)
         segment = Segment(layout, int(start_ns))
         summary.segments.append(segment)
+        blocks = OutputBlocks(writer, channels, model) if writer else None
         lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
         for a in range(lo, hi, BLOCK):
             b = min(a + BLOCK, hi)
             result = loads(model, angle[a:b], omega[a:b], alpha[a:b])
             _account(segment, model, result, omega[a:b])
-            if writer:
-                _write_block(writer, channels, model, result, stamp[a:b], log_time[a:b],
-                             angle[a:b], omega[a:b], joint_name)
+            if blocks:
+                blocks.write(result, stamp[a:b], log_time[a:b], omega[a:b])
             done += b - a
             if progress:
                 progress(done, len(stamp))
@@ -166,46 +166,57 @@ def _layout_text(messages, log_time, layout_file):
     return next(text for t, text in messages if t == log_time)
 
 
-def _output_channels(writer, source):
+def _output_channels(writer):
     return {'layout': writer.add_channel('/layout', STRING, latched=True),
-            'joint_states': writer.add_channel(source, JOINT_STATE, best_effort=True),
             'bearing_load': writer.add_channel('/bearing_load', WRENCH),
             'unbalance': writer.add_channel('/unbalance', WRENCH),
             'drive_torque': writer.add_channel('/drive_torque', WRENCH),
             'supports': {}}
 
 
-def _write_block(writer, channels, model, result, stamp, log_time, angle, omega, joint):
-    supports = channels['supports']
-    for s in model.supports:
-        if s.name not in supports:
-            supports[s.name] = writer.add_channel(f'/supports/{s.name}/load', WRENCH)
-    stator, rotor = wrench_stamped_layout(STATOR_FRAME), wrench_stamped_layout(ROTOR_FRAME)
-    parts = [(channels['joint_states'], joint_state_layout('', [joint])),
-             (channels['bearing_load'], stator)]
-    parts += [(supports[s.name], stator) for s in model.supports]
-    parts += [(channels['unbalance'], rotor), (channels['drive_torque'], rotor)]
-    n = len(stamp)
-    block = MessageBlock(parts, n)
-    array = block.array
-    sec, nanosec = np.divmod(stamp, 1_000_000_000)
-    for g in range(len(parts)):
-        array[f'{g}.sec'], array[f'{g}.nanosec'] = sec, nanosec
-    array['0.position_0'], array['0.velocity_0'] = angle, omega
-    wrenches = [(result.force_stator, result.moment_stator)]
-    wrenches += [(result.support_force[s.name], result.support_moment[s.name])
-                 for s in model.supports]
-    w2 = omega * omega
-    (u_x, u_y), (p_xz, p_yz) = static_unbalance(model), couple_unbalance(model)
-    zero = np.zeros(n)
-    wrenches.append((np.stack([w2 * u_x, w2 * u_y, zero], 1),
-                     np.stack([-w2 * p_yz, w2 * p_xz, zero], 1)))
-    wrenches.append((np.zeros((n, 3)), np.stack([zero, zero, result.drive_torque], 1)))
-    for g, (force, torque) in enumerate(wrenches, start=1):
-        for i, axis in enumerate('xyz'):
-            array[f'{g}.force_{axis}'] = force[:, i]
-            array[f'{g}.torque_{axis}'] = torque[:, i]
-    writer.write_block(block, log_time)
+class OutputBlocks:
+    """The message blocks of one layout's outputs, made once and refilled (SUB samples)."""
+
+    def __init__(self, writer, channels, model):
+        """Register the support channels and lay out the block for ``model``'s supports."""
+        supports = channels['supports']
+        for s in model.supports:
+            if s.name not in supports:
+                supports[s.name] = writer.add_channel(f'/supports/{s.name}/load', WRENCH)
+        stator, rotor = wrench_stamped_layout(STATOR_FRAME), wrench_stamped_layout(ROTOR_FRAME)
+        parts = [(channels['bearing_load'], stator)]
+        parts += [(supports[s.name], stator) for s in model.supports]
+        parts += [(channels['unbalance'], rotor), (channels['drive_torque'], rotor)]
+        self.writer, self.model = writer, model
+        self.block = MessageBlock(parts, SUB)
+        self.static, self.couple = static_unbalance(model), couple_unbalance(model)
+
+    def write(self, result, stamp, log_time, omega):
+        """Write the outputs of a computed block of samples, SUB samples at a time."""
+        model = self.model
+        wrenches = [(result.force_stator, result.moment_stator)]
+        wrenches += [(result.support_force[s.name], result.support_moment[s.name])
+                     for s in model.supports]
+        (u_x, u_y), (p_xz, p_yz) = self.static, self.couple
+        sec_all, nanosec_all = np.divmod(stamp, 1_000_000_000)
+        w2_all = omega * omega
+        fields = self.block.fields
+        for a in range(0, len(stamp), SUB):
+            b = min(a + SUB, len(stamp))
+            n = b - a
+            sec, nanosec, w2 = sec_all[a:b], nanosec_all[a:b], w2_all[a:b]
+            g_last = len(wrenches) + 1
+            for g in range(g_last + 1):
+                fields[f'{g}.sec'][:n], fields[f'{g}.nanosec'][:n] = sec, nanosec
+            for g, (force, torque) in enumerate(wrenches):
+                for i, axis in enumerate('xyz'):
+                    fields[f'{g}.force_{axis}'][:n] = force[a:b, i]
+                    fields[f'{g}.torque_{axis}'][:n] = torque[a:b, i]
+            g = len(wrenches)          # unbalance: U omega^2, couple moment
+            fields[f'{g}.force_x'][:n], fields[f'{g}.force_y'][:n] = w2 * u_x, w2 * u_y
+            fields[f'{g}.torque_x'][:n], fields[f'{g}.torque_y'][:n] = -w2 * p_yz, w2 * p_xz
+            fields[f'{g_last}.torque_z'][:n] = result.drive_torque[a:b]
+            self.writer.write_block(self.block, log_time[a:b], n)
 
 
 def _account(segment, model, result, omega):
