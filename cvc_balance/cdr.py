@@ -63,14 +63,14 @@ class CdrLayout:
 
     @property
     def template(self):
-        """The constant bytes of one message."""
+        """Return the constant bytes of one message."""
         return bytes(self._data)
 
     def _align(self, alignment):
         self._data.extend(b'\x00' * (-(len(self._data) - 4) % alignment))
 
     def number(self, name, fmt):
-        """Add a variable number ('<i4', '<u4', '<f8') called ``name``."""
+        """Add a variable field called ``name``: '<i4', '<u4' or '<f8'."""
         size = struct.calcsize(fmt[0] + {'i4': 'i', 'u4': 'I', 'f8': 'd'}[fmt[1:]])
         self._align(size)
         self.fields[name] = (len(self._data), fmt)

@@ -34,7 +34,6 @@ CHUNK = 1 << 16
 """Samples per block in the vectorised path: the temporaries stay in cache."""
 
 
-
 @dataclass(frozen=True)
 class RotorModel:
     """

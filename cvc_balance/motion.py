@@ -94,7 +94,7 @@ def sample_problem(time, last_time, angle, omega, max_speed):
 
 def acceleration_series(time, omega, time_constant, block=None):
     """
-    The :class:`AccelerationEstimator`'s output for whole arrays of samples, vectorised.
+    Compute the :class:`AccelerationEstimator`'s output for whole arrays, vectorised.
 
     ``time`` (s, increasing) and ``omega`` (rad/s) are numpy arrays. Each sum
     of the estimator is a first-order recursion s_k = exp(-dt_k / tau) s_(k-1)

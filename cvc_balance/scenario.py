@@ -141,7 +141,7 @@ def _motion(profile, rate, path):
 
 
 def _layouts(layout, events, path):
-    """The layout mapping in force from each event's time (validated)."""
+    """Return the layout mapping in force from each event's time (validated)."""
     current = copy.deepcopy(layout)
     out = [(0.0, copy.deepcopy(current))]
     for i, event in enumerate(sorted(events, key=lambda e: float(e.get('at', 0.0)))):
