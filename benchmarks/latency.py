@@ -55,7 +55,7 @@ class Probe:
         self.publishers = {}
         for name, (topic_in, topic_out) in TARGETS.items():
             self.publishers[name] = self.node.create_publisher(JointState, topic_in,
-                                                               input_qos(50))
+                                                               input_qos(200))
             self.node.create_subscription(
                 WrenchStamped, topic_out, self._recorder(self.received[name]),
                 QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))

@@ -22,7 +22,7 @@ class Relay(Node):
         self._out = self.create_publisher(WrenchStamped, 'relay_out', OUTPUT_QOS)
         self._msg = WrenchStamped()
         self._msg.header.frame_id = 'stator'
-        self.create_subscription(JointState, 'joint_states', self._relay, input_qos(50))
+        self.create_subscription(JointState, 'joint_states', self._relay, input_qos(200))
 
     def _relay(self, msg):
         self._msg.header.stamp = msg.header.stamp

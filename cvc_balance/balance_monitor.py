@@ -57,7 +57,9 @@ def input_qos(depth):
 
     The preset's 5 messages are 5 ms of a 1 kHz encoder: on a busy 2-core
     machine a process is descheduled that long often enough to lose about
-    1.5 % of the samples (measured); 50 absorb such stalls.
+    1.5 % of the samples (measured). 50 sufficed for the node alone; with its
+    own recording and four processes on two cores, runs of 20-40 samples were
+    lost; 200 (the default) absorbed them in every run.
     """
     return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
                       reliability=qos_profile_sensor_data.reliability,
@@ -81,7 +83,7 @@ PARAMETERS = (
     ('max_speed', 1000.0, 'absolute speeds above this (rad/s) are rejected as absurd',
      (1e-3, 1e5)),
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
-    ('input_depth', 50, 'history depth of the best-effort joint_states and speed '
+    ('input_depth', 200, 'history depth of the best-effort joint_states and speed '
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
      'no recording', None),
