@@ -29,8 +29,11 @@ def ros_environment():
 class NodeProcess:
     """The node under test, started as ``python -m MODULE --ros-args ...``."""
 
+    running = []   # every process started and not yet stopped: the fixture ends them
+
     def __init__(self, module, ros_args, log_path):
         """Start it; its output goes to ``log_path``."""
+        NodeProcess.running.append(self)
         self.log_path = log_path
         self._log = open(log_path, 'w')
         self.process = subprocess.Popen(
@@ -39,6 +42,8 @@ class NodeProcess:
 
     def stop(self, sig=signal.SIGINT, timeout=10.0):
         """Send ``sig``; return the exit code (None if it had to be killed)."""
+        if self in NodeProcess.running:
+            NodeProcess.running.remove(self)
         if self.process.poll() is None:
             self.process.send_signal(sig)
             try:

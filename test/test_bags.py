@@ -252,7 +252,7 @@ def test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk(tmp_path):
     probe = Probe('kill_probe')
     publisher = probe.publisher(JointState, 'joint_states', sensor=True)
     assert probe.spin_until(lambda: publisher.get_subscription_count() > 0, timeout=20)
-    probe.spin_for(0.5)
+    probe.spin_for(1.5)   # the recorder's side of the match may come later
     sent = 0
     start = time.monotonic()
     while time.monotonic() - start < 2.0:
