@@ -35,3 +35,20 @@ def test_same_length_as_rclpy_serialisation():
         msg.header.frame_id = frame_id
         ours = WrenchStampedEncoder(frame_id).encode(0, 0, (0,) * 3, (0,) * 3)
         assert len(ours) == len(serialize_message(msg))
+
+
+@pytest.mark.parametrize('frame_id', ['', 'stator', 'gantry_base_link'])
+def test_block_layout_and_per_message_encoder_give_the_same_bytes(frame_id):
+    """The numpy template (bags) and the struct encoder (live node) must never drift apart."""
+    import numpy as np
+    from cvc_balance.cdr import wrench_stamped_layout
+    layout = wrench_stamped_layout(frame_id)
+    data = bytearray(layout.template)
+    values = {'sec': 7, 'nanosec': 123, 'force_x': 1.5, 'force_y': -2.0, 'force_z': 3.25,
+              'torque_x': -4.0, 'torque_y': 5.5, 'torque_z': 1e-300}
+    for name, (offset, fmt) in layout.fields.items():
+        np.frombuffer(data, dtype=fmt, count=1, offset=offset)  # in bounds
+        data[offset:offset + np.dtype(fmt).itemsize] = np.array(values[name], fmt).tobytes()
+    encoded = WrenchStampedEncoder(frame_id).encode(
+        7, 123, (1.5, -2.0, 3.25), (-4.0, 5.5, 1e-300))
+    assert bytes(data) == encoded
