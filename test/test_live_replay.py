@@ -14,9 +14,10 @@ import sys
 import numpy as np
 import pytest
 
+from rosbags.highlevel import AnyReader
+
 from cvc_balance.mcap_reader import Bag, wrench_samples
 from cvc_balance.replay import replay
-from reference import relative_error  # noqa: F401  (same error measure family)
 from ros_harness import NodeProcess, ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +49,16 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
     offline = tmp_path / 'offline.mcap'
     summary = replay(bag, offline)
     assert f'{summary.accepted} accepted, 0 rejected, 0 dropped' in log, log
+    assert not Bag(live).problems          # the recorder finalised the file on SIGINT
+    by_rosbags = {}
+    with AnyReader([live]) as reader:     # an independent reader, every message
+        for connection, _, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            by_rosbags.setdefault(connection.topic, []).append(
+                msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
     got, expected = outputs(live), outputs(offline)
+    assert {t: sorted(s) for t, s in by_rosbags.items()} == \
+        {t: sorted(s.tolist()) for t, (s, _) in got.items()}
     assert got.keys() == expected.keys()
     for topic, (stamps, values) in expected.items():
         live_stamps, live_values = got[topic]
@@ -58,7 +68,13 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
         assert np.abs(live_values[order] - values).max() <= 1e-9 * scale, topic
     if record:
         recorded = Bag(tmp_path / 'node.mcap')
-        assert not recorded.problems
+        assert not recorded.problems       # the node finalised its recording on SIGINT
+        with AnyReader([tmp_path / 'node.mcap']) as reader:
+            counts = {}
+            for connection, _, raw in reader.messages():
+                reader.deserialize(raw, connection.msgtype)
+                counts[connection.topic] = counts.get(connection.topic, 0) + 1
+        assert counts['/bearing_load'] == counts['/joint_states'] == summary.accepted
         topics = recorded.topics()
         for topic in ('/joint_states', '/layout', '/bearing_load', '/diagnostics',
                       '/supports/front/load'):
