@@ -76,7 +76,18 @@ def _parser():
     replay.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
+    replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
     replay.set_defaults(run=_replay)
+
+    view = commands.add_parser('view', help='log every sample of a bag to a rerun .rrd',
+                               description='Compute a bag\'s run (as replay does) and log it '
+                               'for the rerun viewer: the turning gantry, loads, unbalance.')
+    view.add_argument('bag', metavar='BAG')
+    view.add_argument('-o', '--output', required=True, metavar='RUN.rrd')
+    view.add_argument('--every', type=int, default=10, metavar='N',
+                      help='draw load arrows for every N-th sample (plots get all)')
+    view.add_argument('--joint-name', default='gantry_joint')
+    view.set_defaults(run=_view)
 
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
                                description='Publish the bag\'s layout and motion messages with '
@@ -143,11 +154,31 @@ def _simulate(args):
 def _replay(args):
     from cvc_balance.replay import format_summary, progress_bar, replay
     show = args.progress if args.progress is not None else sys.stderr.isatty()
+    logger = _rerun_logger(args.rrd, args.bag) if args.rrd else None
     summary = replay(args.bag, args.output, args.layout, args.joint_name,
                      args.alpha_time_constant, args.max_speed,
                      '' if args.compression == 'none' else args.compression,
-                     progress_bar() if show else None)
+                     progress_bar() if show else None, observer=logger)
+    if logger:
+        logger.finish()
     print(format_summary(summary))
+    return 0
+
+
+def _rerun_logger(path, bag, every=10):
+    from cvc_balance.rerun_log import FileRunLogger
+    return FileRunLogger(path, bag, every)
+
+
+def _view(args):
+    from cvc_balance.replay import replay
+    logger = _rerun_logger(args.output, args.bag, args.every)
+    summary = replay(args.bag, joint_name=args.joint_name, observer=logger)
+    logger.finish()
+    print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
+          f'{len(summary.segments)} layouts')
+    for problem in summary.problems:
+        print(f'  problem: {problem}')
     return 0
 
 

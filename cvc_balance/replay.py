@@ -90,8 +90,14 @@ def read_inputs(bag, joint_name):
 
 
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
-           time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None):
-    """Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary."""
+           time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
+           observer=None):
+    """
+    Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary.
+
+    ``observer`` (e.g. a rerun RunLogger) gets ``layout(start_ns, model)`` for each
+    layout and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
+    """
     started = time.perf_counter()
     bag = Bag(bag_path)
     summary = ReplaySummary(str(bag_path))
@@ -141,6 +147,10 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         segment = Segment(layout, int(start_ns))
         summary.segments.append(segment)
         blocks = OutputBlocks(writer, channels, model) if writer else None
+        if observer is not None:
+            first = np.searchsorted(log_time, start_ns)
+            observer.layout(int(stamp[first]) if first < len(stamp) else max(int(start_ns), 0),
+                            model)
         lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
         for a in range(lo, hi, BLOCK):
             b = min(a + BLOCK, hi)
@@ -148,6 +158,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
             _account(segment, model, result, omega[a:b])
             if blocks:
                 blocks.write(result, stamp[a:b], log_time[a:b], omega[a:b])
+            if observer is not None:
+                observer.samples(stamp[a:b], angle[a:b], omega[a:b], alpha[a:b], result)
             done += b - a
             if progress:
                 progress(done, len(stamp))

@@ -20,14 +20,13 @@ import pytest
 from rosbags.highlevel import AnyReader
 import yaml
 
-from cvc_balance.engine import RotorModel, sample_loads
-from cvc_balance.layout import parse_layout
+from cvc_balance.engine import RotorModel
 from cvc_balance.mcap_reader import Bag, BagError, joint_samples
-from cvc_balance.motion import AccelerationEstimator
 from cvc_balance.replay import replay
 from cvc_balance.scenario import load_scenario, write_bag
-from cvc_balance.unbalance import couple_unbalance, static_unbalance
+from cvc_balance.unbalance import static_unbalance
 from ros_harness import ros_environment
+from scenario_reference import expected_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = sorted((ROOT / 'bags').glob('*.yaml'))
@@ -123,25 +122,9 @@ def test_offline_replay_matches_the_engine_sample_by_sample(scenario_file, tmp_p
     bag = scenario_file.with_suffix('.mcap')
     out = tmp_path / 'out.mcap'
     summary = replay(bag, out)
-    scenario = load_scenario(scenario_file)
-    stamps = scenario.stamps_ns()
-    angle, omega = scenario.measured()
+    expected, _ = expected_outputs(scenario_file)
+    stamps = load_scenario(scenario_file).stamps_ns()
     assert summary.accepted == len(stamps) and summary.rejected == 0
-    models = [(round((scenario.start + at - 0.5 / scenario.rate) * 1e9),
-               RotorModel.from_layout(parse_layout(m))) for at, m in scenario.layouts]
-    estimator = AccelerationEstimator(0.1)
-    expected = {}
-    for ns, q, w in zip(stamps.tolist(), angle, omega):
-        alpha = estimator.update(ns * 1e-9, w)
-        model = [m for t, m in models if t <= ns][-1]
-        result = sample_loads(model, q, w, alpha)
-        (u_x, u_y), (p_xz, p_yz) = static_unbalance(model), couple_unbalance(model)
-        expected[ns] = {
-            '/bearing_load': list(result.force_stator) + list(result.moment_stator),
-            '/unbalance': [w * w * u_x, w * w * u_y, 0, -w * w * p_yz, w * w * p_xz, 0],
-            '/drive_torque': [0, 0, 0, 0, 0, result.drive_torque]}
-        for name, (force, moment) in result.supports.items():
-            expected[ns][f'/supports/{name}/load'] = list(force) + list(moment)
     got = read_with_rosbags(out)
     for topic in [t for t in got if t not in ('/layout', '/joint_states')]:
         values = np.array([wrench(m) for _, m in got[topic]])

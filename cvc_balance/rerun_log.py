@@ -1,0 +1,208 @@
+"""
+The rerun view of a run: the turning gantry, its loads and its unbalance.
+
+One logger for both paths (the live node and ``cvc-balance view`` of a bag). What it
+logs, on the timeline ``time`` (the samples' stamps):
+
+* ``world``: the stator ring and supports; ``world/rotor`` turning with q; each
+  component as its shape at (R, theta, z), coloured by its share of the static
+  unbalance (blue: none, red: the largest); the correction planes and where the
+  correction masses go; arrows for the load at each support and the unbalance force.
+* ``plots``: omega, alpha, drive torque, each support's load (stator-frame components
+  and magnitude), the unbalance per plane against the grade's limit at the current speed.
+* ``polar/<plane>``: the unbalance vector per correction plane with its tolerance circle.
+* ``events``: layout changes; ``verdict``: the grade verdict.
+
+Units: SI in the 3D view (m; arrows scaled, see ``NEWTONS_PER_METRE``), g mm and degrees
+where people read them. The rerun SDK is imported here only (an adapter).
+"""
+
+import math
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from cvc_balance.assessment import assess_balance
+from cvc_balance.iso21940 import permissible_unbalance
+
+TIMELINE = 'time'
+NEWTONS_PER_METRE = 20000.0
+"""Load arrows: 20 kN per metre of arrow."""
+PLANES = ('plane_I', 'plane_II')
+
+
+def blueprint(support_names):
+    """Arrange the views: 3D left, plots in the middle, polar and text right."""
+    plots = [rrb.TimeSeriesView(origin='plots/speed', name='omega, alpha'),
+             rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque'),
+             rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance vs limit')]
+    plots += [rrb.TimeSeriesView(origin=f'plots/supports/{name}', name=f'{name} load')
+              for name in support_names]
+    return rrb.Blueprint(rrb.Horizontal(
+        rrb.Spatial3DView(origin='world', name='gantry'),
+        rrb.Vertical(*plots),
+        rrb.Vertical(rrb.Spatial2DView(origin='polar', name='unbalance per plane (g mm)'),
+                     rrb.TextDocumentView(origin='verdict', name='verdict'),
+                     rrb.TextLogView(origin='events', name='events')),
+        column_shares=[3, 3, 2]))
+
+
+class RunLogger:
+    """Log a run to a rerun recording (see the module's description)."""
+
+    def __init__(self, recording, service_speed=None):
+        """Log to ``recording`` (a rerun.RecordingStream)."""
+        self.rec = recording
+        self.service_speed = service_speed
+        self._model = None
+        self._planes = ()
+
+    def layout(self, time_ns, model):
+        """Draw the rotor of a layout in force from ``time_ns``, and say so."""
+        layout = model.layout
+        self._model = model
+        rec = self.rec
+        rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        rec.log('world/stator/ring',
+                rr.LineStrips3D([_circle(0.85, 0.0)], colors=[(150, 150, 150)]))
+        rec.log('world/stator/supports', rr.Points3D(
+            [[0.0, 0.0, s.z] for s in layout.supports], radii=0.03,
+            labels=[s.name for s in layout.supports], colors=[(60, 60, 60)]))
+        shares = [c.mass * c.radius for c in layout.components]
+        top = max(shares) or 1.0
+        rec.log('world/rotor/components', rr.Clear(recursive=True))
+        for component, share in zip(layout.components, shares):
+            rec.log(f'world/rotor/components/{component.name}',
+                    _shape(component, _colour(share / top)))
+        speed = self.service_speed or layout.balancing.service_speed or 1.0
+        assessment = assess_balance(model, speed)
+        self._planes = assessment.planes
+        for label, plane, allowed in zip(PLANES, assessment.planes,
+                                         assessment.plane_permissible):
+            radius = plane.correction_radius
+            rec.log(f'world/rotor/correction/{label}', rr.LineStrips3D(
+                [_circle(radius, plane.z)], colors=[(120, 200, 120)]))
+            rec.log(f'world/rotor/correction/{label}/mass', rr.Points3D(
+                [[radius * math.cos(plane.correction_angle),
+                  radius * math.sin(plane.correction_angle), plane.z]],
+                radii=0.02 + 0.2 * min(plane.correction_mass, 1.0), colors=[(40, 160, 40)],
+                labels=[f'{plane.correction_mass * 1e3:.0f} g']))
+            rec.log(f'polar/{label}/unbalance', rr.Arrows2D(
+                origins=[[0.0, 0.0]], vectors=[[v * 1e6 for v in plane.vector]],
+                labels=[f'{label}: {plane.amount * 1e6:.0f} g mm at '
+                        f'{math.degrees(plane.angle):.1f} deg']))
+            rec.log(f'polar/{label}/tolerance', rr.LineStrips2D(
+                [[(allowed * 1e6 * math.cos(a), allowed * 1e6 * math.sin(a))
+                  for a in np.linspace(0.0, 2 * math.pi, 65)]], colors=[(200, 60, 60)]))
+        verdict = 'WITHIN' if assessment.within_grade else 'OUT OF'
+        rec.log('verdict', rr.TextDocument(
+            f'# {layout.name}\n\ndigest `{layout.digest()}`\n\nachieved G '
+            f'{assessment.equivalent_grade:.3g} at {speed:.4g} rad/s: **{verdict} G '
+            f'{assessment.grade:g}**\n\n' + '\n'.join(
+                f'- {label}: {p.amount * 1e6:.0f} g mm at {math.degrees(p.angle):.1f} deg; '
+                f'correct with {p.correction_mass * 1e3:.0f} g at '
+                f'{math.degrees(p.correction_angle):.1f} deg'
+                for label, p in zip(PLANES, assessment.planes)), media_type='text/markdown'))
+        rec.log('events', rr.TextLog(f"layout '{layout.name}' ({layout.digest()}) in force",
+                                     level='INFO'))
+
+    def samples(self, stamp_ns, angle, omega, alpha, result, every=1):
+        """Log a block of samples, given as arrays, and the engine's result for them."""
+        model, rec = self._model, self.rec
+        times = rr.TimeColumn(TIMELINE, timestamp=np.asarray(stamp_ns) * 1e-9)
+        scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,
+                   'plots/drive_torque': result.drive_torque}
+        for name, force in result.support_force.items():
+            for i, axis in enumerate('xyz'):
+                scalars[f'plots/supports/{name}/{axis}'] = force[:, i]
+            scalars[f'plots/supports/{name}/magnitude'] = np.linalg.norm(force, axis=1)
+        speed = np.abs(omega)
+        for label, plane in zip(PLANES, self._planes):
+            scalars[f'plots/unbalance/{label}'] = np.full(len(omega), plane.amount * 1e6)
+            with np.errstate(divide='ignore'):
+                limit = permissible_unbalance(model.layout.balancing.grade, model.mass,
+                                              speed) * 1e6
+            scalars[f'plots/unbalance/{label}_limit'] = np.where(speed > 1.0, limit, np.nan)
+        for path, values in scalars.items():
+            rr.send_columns(path, indexes=[times],
+                            columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
+                            recording=rec)
+        rr.send_columns('world/rotor', indexes=[times], columns=rr.Transform3D.columns(
+            rotation_axis_angle=[rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(q))
+                                 for q in angle]), recording=rec)
+        # Arrows: a subset of the samples (a viewer need not draw them all).
+        for k in range(0, len(omega), every):
+            rec.set_time(TIMELINE, timestamp=stamp_ns[k] * 1e-9)
+            origins = [[0.0, 0.0, s.z] for s in model.supports]
+            vectors = [list(result.support_force[s.name][k] / NEWTONS_PER_METRE)
+                       for s in model.supports]
+            rec.log('world/stator/loads',
+                    rr.Arrows3D(origins=origins, vectors=vectors, colors=[(220, 120, 0)]))
+
+
+def _circle(radius, z, points=97):
+    angles = np.linspace(0.0, 2 * math.pi, points)
+    return np.stack([radius * np.cos(angles), radius * np.sin(angles),
+                     np.full(points, z)], axis=1)
+
+
+def _colour(share):
+    share = min(max(share, 0.0), 1.0)
+    return (int(60 + 195 * share), 80, int(255 - 195 * share))
+
+
+def _shape(component, colour):
+    """Return a component's shape in the rotor frame at (R, theta, z), for rerun."""
+    c, s = math.cos(component.angle), math.sin(component.angle)
+    centre = [component.radius * c, component.radius * s, component.z]
+    turn = rr.RotationAxisAngle(axis=[0, 0, 1], radians=component.angle)
+    shape = component.shape
+    label = [component.name]
+    if shape is None or shape.type == 'point':
+        return rr.Points3D([centre], radii=0.02, colors=[colour], labels=label)
+    if shape.type == 'box':
+        return rr.Boxes3D(centers=[centre], half_sizes=[[v / 2 for v in shape.size]],
+                          rotation_axis_angles=[turn], colors=[colour], labels=label,
+                          fill_mode='solid')
+    if shape.type == 'sphere':
+        return rr.Ellipsoids3D(centers=[centre], half_sizes=[[shape.radius] * 3],
+                               colors=[colour], labels=label, fill_mode='solid')
+    radius = shape.outer_radius if shape.type == 'tube' else shape.radius
+    # rerun's cylinders lie along Z; radial and tangential axes are turned onto x, y.
+    axis = {'axial': None, 'radial': [-s, c, 0.0], 'tangential': [c, s, 0.0]}[shape.axis]
+    rotation = [rr.RotationAxisAngle(axis=axis, radians=math.pi / 2)] if axis else None
+    return rr.Cylinders3D(centers=[centre], lengths=[shape.length], radii=[radius],
+                          rotation_axis_angles=rotation, colors=[colour], labels=label,
+                          fill_mode='solid')
+
+
+class FileRunLogger(RunLogger):
+    """A RunLogger writing an .rrd file, its blueprint sent once the supports are known."""
+
+    def __init__(self, path, name='run', every=10):
+        """Open ``path``; rerun's analytics stay off (no network)."""
+        import os
+        os.environ.setdefault('RERUN_ANALYTICS', 'false')
+        recording = rr.RecordingStream('cvc_balance', recording_id=str(name))
+        recording.save(str(path))
+        super().__init__(recording)
+        self.every = every
+        self._supports = []
+
+    def layout(self, time_ns, model):
+        """Send the blueprint with every support seen so far, then log the layout."""
+        names = [s.name for s in model.supports if s.name not in self._supports]
+        if names:
+            self._supports += names
+            self.rec.send_blueprint(blueprint(self._supports))
+        super().layout(time_ns, model)
+
+    def samples(self, stamp_ns, angle, omega, alpha, result, every=None):
+        """Log a block of samples, arrows for every ``every``-th."""
+        super().samples(stamp_ns, angle, omega, alpha, result, every or self.every)
+
+    def finish(self):
+        """Flush and close the file."""
+        self.rec.flush()
+        self.rec.disconnect()
