@@ -87,6 +87,11 @@ PARAMETERS = (
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
      'no recording', None),
+    ('rerun', '', 'rerun view of the run: save (to rerun_target, an .rrd), connect (to the '
+     'viewer at rerun_target) or spawn (a viewer); empty: off', None),
+    ('rerun_target', '', '.rrd path (save) or viewer URL (connect)', None),
+    ('rerun_every', 20, 'log every n-th sample to rerun (the viewer need not draw 1 kHz)',
+     (1, 100000)),
 )
 
 
@@ -137,6 +142,15 @@ class BalanceMonitor(Node):
         self.create_subscription(Float64, 'speed', self._on_speed, sensor_qos)
         self.create_subscription(String, 'layout', self._on_layout, LAYOUT_QOS)
         self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
+        self._rerun = None
+        if self.params['rerun']:
+            from cvc_balance.rerun_log import open_recording, RunLogger
+            self._rerun = RunLogger(open_recording(self.params['rerun'],
+                                                   self.params['rerun_target'],
+                                                   name=self.get_fully_qualified_name()),
+                                    every=self.params['rerun_every'])
+            if self._active is not None:
+                self._rerun.layout(0, self._active.model)
         self._recorder = None
         self._record = {}
         if self.params['record_path']:
@@ -155,6 +169,9 @@ class BalanceMonitor(Node):
         if self._recorder is not None:
             self._recorder.close()
             self._recorder = None
+        if self._rerun is not None:
+            self._rerun.finish()
+            self._rerun = None
         return super().destroy_node()
 
     def publisher(self, topic):
@@ -226,6 +243,8 @@ class BalanceMonitor(Node):
         self._torque_pub.publish(torque)
         if self._record:
             self._record_outputs(bearing, supports, unbalance, torque)
+        if self._rerun is not None:
+            self._rerun.sample(sec * 1_000_000_000 + nanosec, angle, omega, alpha, result)
         self._omega = omega
         self._counts['accepted'] += 1
         self._period_accepted += 1
@@ -273,6 +292,9 @@ class BalanceMonitor(Node):
             return
         self._active = active  # one reference swap: takes effect between two samples
         self._layout_error = ''
+        if getattr(self, '_rerun', None) is not None:
+            # On the samples' time line: from the last sample on.
+            self._rerun.layout(int((self._last_time or 0.0) * 1e9), active.model)
         self.get_logger().info(f"layout '{layout.name}' ({active.digest}) from {source}: "
                                f'{len(layout.components)} components, '
                                f'{active.model.mass:.3f} kg')
@@ -386,7 +408,7 @@ def main(args=None):
     rclpy.init(args=args)
     try:
         node = BalanceMonitor()
-    except ParameterException as error:
+    except (ParameterException, ValueError) as error:   # ValueError: e.g. the rerun mode
         print(f'balance_monitor: error: {error}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2

@@ -166,8 +166,8 @@ def _replay(args):
 
 
 def _rerun_logger(path, bag, every=10):
-    from cvc_balance.rerun_log import FileRunLogger
-    return FileRunLogger(path, bag, every)
+    from cvc_balance.rerun_log import open_recording, RunLogger
+    return RunLogger(open_recording('save', path, name=bag), every)
 
 
 def _view(args):

@@ -18,6 +18,7 @@ where people read them. The rerun SDK is imported here only (an adapter).
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import rerun as rr
@@ -51,16 +52,28 @@ def blueprint(support_names):
 class RunLogger:
     """Log a run to a rerun recording (see the module's description)."""
 
-    def __init__(self, recording, service_speed=None):
-        """Log to ``recording`` (a rerun.RecordingStream)."""
+    def __init__(self, recording, every=1, service_speed=None):
+        """Log to ``recording`` (a rerun.RecordingStream); arrows every ``every``-th sample."""
         self.rec = recording
+        self.every = every
         self.service_speed = service_speed
         self._model = None
         self._planes = ()
+        self._supports = []
+        self._count = 0
+
+    def finish(self):
+        """Flush and close the recording."""
+        self.rec.flush()
+        self.rec.disconnect()
 
     def layout(self, time_ns, model):
         """Draw the rotor of a layout in force from ``time_ns``, and say so."""
         layout = model.layout
+        new = [s.name for s in model.supports if s.name not in self._supports]
+        if new:   # the blueprint has a plot per support: resend it when supports appear
+            self._supports += new
+            self.rec.send_blueprint(blueprint(self._supports))
         self._model = model
         rec = self.rec
         rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
@@ -107,8 +120,21 @@ class RunLogger:
         rec.log('events', rr.TextLog(f"layout '{layout.name}' ({layout.digest()}) in force",
                                      level='INFO'))
 
-    def samples(self, stamp_ns, angle, omega, alpha, result, every=1):
+    def sample(self, stamp_ns, angle, omega, alpha, result):
+        """Log one sample of the live node (SampleLoads), every ``every``-th one only."""
+        self._count += 1
+        if self._count % self.every:
+            return
+        one = SimpleNamespace(
+            support_force={name: np.array([force]) for name, (force, _) in
+                           result.supports.items()},
+            drive_torque=np.array([result.drive_torque]))
+        self.samples(np.array([stamp_ns]), np.array([angle]), np.array([omega]),
+                     np.array([alpha]), one, every=1)
+
+    def samples(self, stamp_ns, angle, omega, alpha, result, every=None):
         """Log a block of samples, given as arrays, and the engine's result for them."""
+        every = every or self.every
         model, rec = self._model, self.rec
         times = rr.TimeColumn(TIMELINE, timestamp=np.asarray(stamp_ns) * 1e-9)
         scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,
@@ -177,32 +203,23 @@ def _shape(component, colour):
                           fill_mode='solid')
 
 
-class FileRunLogger(RunLogger):
-    """A RunLogger writing an .rrd file, its blueprint sent once the supports are known."""
+def open_recording(mode, target='', name='cvc_balance'):
+    """
+    Open a rerun recording: 'save' to a file, 'connect' to a viewer, or 'spawn' one.
 
-    def __init__(self, path, name='run', every=10):
-        """Open ``path``; rerun's analytics stay off (no network)."""
-        import os
-        os.environ.setdefault('RERUN_ANALYTICS', 'false')
-        recording = rr.RecordingStream('cvc_balance', recording_id=str(name))
-        recording.save(str(path))
-        super().__init__(recording)
-        self.every = every
-        self._supports = []
-
-    def layout(self, time_ns, model):
-        """Send the blueprint with every support seen so far, then log the layout."""
-        names = [s.name for s in model.supports if s.name not in self._supports]
-        if names:
-            self._supports += names
-            self.rec.send_blueprint(blueprint(self._supports))
-        super().layout(time_ns, model)
-
-    def samples(self, stamp_ns, angle, omega, alpha, result, every=None):
-        """Log a block of samples, arrows for every ``every``-th."""
-        super().samples(stamp_ns, angle, omega, alpha, result, every or self.every)
-
-    def finish(self):
-        """Flush and close the file."""
-        self.rec.flush()
-        self.rec.disconnect()
+    ``target`` is the .rrd path (save) or the viewer's URL (connect). No usage data is
+    sent from the SDK; a spawned viewer keeps its own analytics setting
+    (``rerun analytics disable``).
+    """
+    import os
+    os.environ.setdefault('RERUN_ANALYTICS', 'false')
+    recording = rr.RecordingStream('cvc_balance', recording_id=str(name))
+    if mode == 'save':
+        recording.save(str(target or 'run.rrd'))
+    elif mode == 'connect':
+        recording.connect_grpc(target or None)
+    elif mode == 'spawn':
+        recording.spawn()
+    else:
+        raise ValueError(f"rerun mode must be save, connect or spawn, got {mode!r}")
+    return recording

@@ -98,3 +98,30 @@ def test_transform_turns_the_rotor_by_the_encoder_angle(logged):
         angle = row['angle'] if 'angle' in row else row['radians']
         assert row['axis'] == pytest.approx([0.0, 0.0, 1.0])
         assert angle == pytest.approx(motion[int(times[k])][0], abs=1e-6)
+
+
+def test_live_node_logs_the_same_view(tmp_path):
+    """The node (rerun:=save, every 10th sample) fed a bag live: same paths, engine values."""
+    import signal
+    from ros_harness import NodeProcess, ros_environment
+
+    out = tmp_path / 'live.rrd'
+    node = NodeProcess('cvc_balance.balance_monitor',
+                       ['-p', 'rerun:=save', '-p', f'rerun_target:={out}', '-p',
+                        'rerun_every:=10'], tmp_path / 'node.log')
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play',
+                          str(ROOT / 'bags' / 'spin_up_tube_swap.mcap')],
+                         env=ros_environment(), capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert node.stop(signal.SIGINT) == 0
+    scalars, _, paths = read_rrd(out)
+    assert {'/world/rotor', '/world/stator/loads', '/plots/speed/omega', '/verdict',
+            '/polar/plane_I/unbalance', '/world/rotor/components/xray_tube'} <= paths
+    expected, motion = expected_outputs(ROOT / 'bags' / 'spin_up_tube_swap.yaml')
+    times, omega = scalars['/plots/speed/omega']
+    assert len(times) == len(expected) // 10
+    for path, pick in (('/plots/speed/omega', lambda ns: motion[ns][1]),
+                       ('/plots/drive_torque', lambda ns: expected[ns]['/drive_torque'][5])):
+        times, values = scalars[path]
+        reference = np.array([pick(int(ns)) for ns in times])
+        assert np.abs(values - reference).max() <= 1e-9 * np.abs(reference).max(), path
