@@ -4,6 +4,7 @@
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
+#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer, rendered headless)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 venv="$here/.venv"
@@ -94,6 +95,22 @@ demo() {
   in_venv cvc-balance replay "$bag"
 }
 
+screenshot() {
+  # The rerun viewer on a bundled bag, rendered headless (Debian's Mesa Vulkan drivers),
+  # saved as docs/viewer.png. Analytics off in a private config folder.
+  if ! dpkg -s mesa-vulkan-drivers libvulkan1 >/dev/null 2>&1; then
+    apt-get update -qq && apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+  fi
+  local work config
+  work="$(mktemp -d)"; config="$work/config"
+  mkdir -p "$here/docs" "$config"
+  XDG_CONFIG_HOME="$config" in_venv rerun analytics disable >/dev/null 2>&1
+  in_venv cvc-balance view "$here/bags/spin_up_tube_swap.mcap" -o "$work/run.rrd"
+  XDG_CONFIG_HOME="$config" in_venv rerun --headless --bind 127.0.0.1 --window-size 1600x900 \
+    "$work/run.rrd" --screenshot-to "$here/docs/viewer.png" >"$work/viewer.log" 2>&1
+  echo "wrote $here/docs/viewer.png"
+}
+
 cmd="${1:-}"
 shift || true
 case "$cmd" in
@@ -108,6 +125,9 @@ case "$cmd" in
   run)
     setup
     in_venv "$@" ;;
+  screenshot)
+    setup
+    screenshot ;;
   *)
     sed -n '2,7p' "$0" >&2
     exit 2 ;;

@@ -144,12 +144,15 @@ class RunLogger:
                 scalars[f'plots/supports/{name}/{axis}'] = force[:, i]
             scalars[f'plots/supports/{name}/magnitude'] = np.linalg.norm(force, axis=1)
         speed = np.abs(omega)
+        service = self.service_speed or model.layout.balancing.service_speed or 0.0
+        # The limit grows as 1 / omega: drawn from a fifth of the service speed on.
+        shown = speed > max(0.2 * service, 1.0)
         for label, plane in zip(PLANES, self._planes):
             scalars[f'plots/unbalance/{label}'] = np.full(len(omega), plane.amount * 1e6)
             with np.errstate(divide='ignore'):
                 limit = permissible_unbalance(model.layout.balancing.grade, model.mass,
                                               speed) * 1e6
-            scalars[f'plots/unbalance/{label}_limit'] = np.where(speed > 1.0, limit, np.nan)
+            scalars[f'plots/unbalance/{label}_limit'] = np.where(shown, limit, np.nan)
         for path, values in scalars.items():
             rr.send_columns(path, indexes=[times],
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
@@ -167,9 +170,9 @@ class RunLogger:
                     rr.Arrows3D(origins=origins, vectors=vectors, colors=[(220, 120, 0)]))
 
 
-def _circle(radius, z, points=97):
+def _circle(radius, z, points=97, centre=(0.0, 0.0, 0.0)):
     angles = np.linspace(0.0, 2 * math.pi, points)
-    return np.stack([radius * np.cos(angles), radius * np.sin(angles),
+    return np.stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles),
                      np.full(points, z)], axis=1)
 
 
@@ -194,6 +197,11 @@ def _shape(component, colour):
     if shape.type == 'sphere':
         return rr.Ellipsoids3D(centers=[centre], half_sizes=[[shape.radius] * 3],
                                colors=[colour], labels=label, fill_mode='solid')
+    if shape.type == 'tube' and shape.axis == 'axial':
+        # A hollow drum drawn solid would hide everything inside it: its four rims.
+        rims = [_circle(r, component.z + end * shape.length / 2, centre=centre)
+                for r in (shape.inner_radius, shape.outer_radius) for end in (-1, 1)]
+        return rr.LineStrips3D(rims, colors=[colour], labels=label * 4)
     radius = shape.outer_radius if shape.type == 'tube' else shape.radius
     # rerun's cylinders lie along Z; radial and tangential axes are turned onto x, y.
     axis = {'axial': None, 'radial': [-s, c, 0.0], 'tangential': [c, s, 0.0]}[shape.axis]
