@@ -29,7 +29,9 @@ from cvc_balance.iso21940 import permissible_unbalance
 
 TIMELINE = 'time'
 NEWTONS_PER_METRE = 20000.0
-"""Load arrows: 20 kN per metre of arrow."""
+"""Support load arrows: 20 kN per metre of arrow."""
+UNBALANCE_NEWTONS_PER_METRE = 200.0
+"""Unbalance force arrow: 200 N per metre (a balanced gantry's is tens of newtons)."""
 PLANES = ('plane_I', 'plane_II')
 
 
@@ -161,6 +163,7 @@ class RunLogger:
             rotation_axis_angle=[rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(q))
                                  for q in angle]), recording=rec)
         # Arrows: a subset of the samples (a viewer need not draw them all).
+        u_x, u_y = model.s_x, model.s_y
         for k in range(0, len(omega), every):
             rec.set_time(TIMELINE, timestamp=stamp_ns[k] * 1e-9)
             origins = [[0.0, 0.0, s.z] for s in model.supports]
@@ -168,6 +171,13 @@ class RunLogger:
                        for s in model.supports]
             rec.log('world/stator/loads',
                     rr.Arrows3D(origins=origins, vectors=vectors, colors=[(220, 120, 0)]))
+            # The static unbalance's centrifugal force, U omega^2, turns with the rotor.
+            w2 = float(omega[k]) ** 2
+            rec.log('world/rotor/unbalance_force', rr.Arrows3D(
+                origins=[[0.0, 0.0, model.s_z / model.mass]],
+                vectors=[[w2 * u_x / UNBALANCE_NEWTONS_PER_METRE,
+                          w2 * u_y / UNBALANCE_NEWTONS_PER_METRE, 0.0]],
+                colors=[(230, 30, 30)]))
 
 
 def _circle(radius, z, points=97, centre=(0.0, 0.0, 0.0)):

@@ -55,6 +55,7 @@ def test_entity_paths_of_every_view_exist(logged):
     _, _, paths = logged
     layout = load_layout(ROOT / 'config' / 'ct_gantry.yaml')
     wanted = {'/world/stator/ring', '/world/stator/supports', '/world/stator/loads',
+              '/world/rotor/unbalance_force',
               '/world/rotor', '/plots/speed/omega', '/plots/speed/alpha',
               '/plots/drive_torque', '/plots/unbalance/plane_I',
               '/plots/unbalance/plane_I_limit', '/polar/plane_I/unbalance',
