@@ -120,13 +120,6 @@ def joint_state_layout(frame_id, names):
     return layout
 
 
-def float64_layout():
-    """std_msgs/msg/Float64: field data."""
-    layout = CdrLayout()
-    layout.number('data', '<f8')
-    return layout
-
-
 def string_message(text):
     """std_msgs/msg/String as CDR bytes."""
     return ENCAPSULATION_LE + _string_field(text)

@@ -39,12 +39,6 @@ DEFAULT_GRAVITY = (0.0, -STANDARD_GRAVITY, 0.0)
 """Gravity in the stator frame, m/s^2: stator Y points up, Z is horizontal."""
 
 
-def rotation_z(angle):
-    """Rotation matrix (3x3) that turns a vector by ``angle`` (rad) about +Z."""
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def turn_xy(x, y, cos_a, sin_a):
     """
     Turn the XY part of a vector by the angle whose cosine and sine are given.

@@ -3,10 +3,10 @@ Mass properties as composable values, and the inertia of the layout's shapes.
 
 A :class:`MassProperties` is mass, first mass moment and inertia tensor about
 the origin of the frame it is expressed in, like Pinocchio's ``Inertia``:
-values add (``a + b`` is the two bodies bolted together) and can be turned
-about Z. :func:`place` puts a body given about its own centre of mass, in its
-own (radial, tangential, axial) frame, at the cylindrical vector components
-(R, theta, z) of the rotor frame, by the thesis's CVC parallel-axis theorem
+values add (``a + b`` is the two bodies bolted together). :func:`place` puts
+a body given about its own centre of mass, in its own (radial, tangential,
+axial) frame, at the cylindrical vector components (R, theta, z) of the rotor
+frame, by the thesis's CVC parallel-axis theorem
 (Eq. 3.7, with its last line corrected: NOTES.md erratum 5).
 
 Units: kg, m, kg m, kg m^2. Tensors hold tensor elements (see
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cvc_balance.frames import rotation_z, tensor_from_elements
+from cvc_balance.frames import tensor_from_elements
 
 SHAPE_AXES = ('radial', 'tangential', 'axial')
 """Directions a shape's symmetry axis can take, own-frame x, y, z."""
@@ -36,11 +36,6 @@ class MassProperties:
     first_moment: np.ndarray
     inertia: np.ndarray
 
-    @classmethod
-    def zero(cls):
-        """Return the empty body."""
-        return cls(0.0, np.zeros(3), np.zeros((3, 3)))
-
     def __add__(self, other):
         """Two bodies rigidly joined, both expressed in the same frame."""
         return MassProperties(self.mass + other.mass,
@@ -56,12 +51,6 @@ class MassProperties:
         """Inertia tensor about the centre of mass, same axes (kg m^2)."""
         c = self.com
         return self.inertia - self.mass * (c @ c * np.eye(3) - np.outer(c, c))
-
-    def turned(self, angle):
-        """Return the same body turned by ``angle`` (rad) about Z through O."""
-        rot = rotation_z(angle)
-        return MassProperties(self.mass, rot @ self.first_moment,
-                              rot @ self.inertia @ rot.T)
 
 
 def parallel_axis_cvc(inertia_com, mass, r_o, phi_o, z_o):

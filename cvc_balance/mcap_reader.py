@@ -18,7 +18,7 @@ import numpy as np
 from cvc_balance.cdr import ENCAPSULATION_LE, find_joint_state_fields, read_string_message
 
 MAGIC = b'\x89MCAP0\r\n'
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
+OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
 MESSAGE_HEADER = 31
 
