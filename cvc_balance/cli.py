@@ -89,6 +89,13 @@ def _parser():
     view.add_argument('--joint-name', default='gantry_joint')
     view.set_defaults(run=_view)
 
+    bench = commands.add_parser('bench', help='error against cost of every method, per scene',
+                                description='Compute the loads of six scenes with every '
+                                'method; write the table (CSV) and the chart (PNG).')
+    bench.add_argument('--csv', default='docs/bench.csv', metavar='FILE')
+    bench.add_argument('--png', default='docs/bench.png', metavar='FILE')
+    bench.set_defaults(run=_bench)
+
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
                                description='Publish the bag\'s layout and motion messages with '
                                'their timing (to drive a running balance_monitor) and record '
@@ -179,6 +186,15 @@ def _view(args):
           f'{len(summary.segments)} layouts')
     for problem in summary.problems:
         print(f'  problem: {problem}')
+    return 0
+
+
+def _bench(args):
+    from cvc_balance.bench import pareto_front, run
+    rows = run(args.csv, args.png)
+    for scene in dict.fromkeys(r['scene'] for r in rows):
+        print(f'Pareto front, {scene}: {", ".join(pareto_front(rows, scene))}')
+    print(f'wrote {args.csv} and {args.png}')
     return 0
 
 
