@@ -78,3 +78,50 @@ def test_pareto_front_reading():
             {'scene': 's', 'method': 'c', 'samples': 1, 'seconds_per_sample': 0.5,
              'max_relative_error': 1e-7}]
     assert pareto_front(rows, 's') == ['a', 'c']
+
+
+@pytest.mark.parametrize('omega', [1e-12, 1e-3, 1e3, 1e4])
+def test_engine_exact_from_rest_to_very_high_speed(omega, case):
+    _, layout, q, _, alpha, _ = case
+    speeds = np.full(len(q), omega)
+    reference = exact_loads(layout, q, speeds, alpha, layout.gravity)
+    prepare, compute = METHODS['aggregated']
+    result = compute(prepare(layout), q, speeds, alpha, layout.gravity)
+    assert max(_relative(got, ref) for got, ref in zip(result, reference)) < 1e-13
+
+
+@pytest.mark.parametrize('scale', [1e-6, 1e-3, 1.0, 1e2, 1e4])
+def test_engine_exact_for_masses_from_a_milligram_to_ten_tonnes(scale):
+    rng = np.random.default_rng(4)
+    mapping = random_layout(rng, n=5, supports=2, every_kind=True)
+    for item in mapping['components']:
+        item['mass'] *= scale / 40.0
+        if 'inertia' in item:
+            item['inertia'] = {k: v * scale / 40.0 for k, v in item['inertia'].items()}
+    layout = parse_layout(mapping)
+    q, omega, alpha = rng.uniform(0, 6, 6), rng.uniform(5, 25, 6), rng.uniform(-4, 4, 6)
+    reference = exact_loads(layout, q, omega, alpha, layout.gravity)
+    prepare, compute = METHODS['aggregated']
+    result = compute(prepare(layout), q, omega, alpha, layout.gravity)
+    assert max(_relative(got, ref) for got, ref in zip(result, reference)) < 1e-13
+
+
+def test_unbalance_vector_is_smooth_where_its_norm_has_a_kink():
+    """Thesis Eq. 4.16-4.19: |F| kinks at balance; the vector's derivative does not jump."""
+    from cvc_balance.engine import RotorModel
+    from cvc_balance.unbalance import static_unbalance
+
+    def vector(r2):
+        model = RotorModel.from_layout(parse_layout({
+            'name': 'two', 'supports': [{'name': 'a', 'z': 0.0}],
+            'components': [{'name': 'p1', 'mass': 40.0, 'radius': 1.0, 'angle': 0.0},
+                           {'name': 'p2', 'mass': 40.0, 'radius': r2, 'angle': np.pi}]}))
+        return np.array(static_unbalance(model))
+    step = 1e-6
+    below = (vector(1.0) - vector(1.0 - step)) / step
+    above = (vector(1.0 + step) - vector(1.0)) / step
+    np.testing.assert_allclose(below, above, atol=1e-6)          # d U / d R2 = -m2 e_x
+    np.testing.assert_allclose(below, [-40.0, 0.0], rtol=1e-6, atol=1e-6)
+    norm = [np.linalg.norm(vector(1.0 + d)) for d in (-step, 0.0, step)]
+    assert (norm[1] - norm[0]) / step == pytest.approx(-40.0, rel=1e-5)
+    assert (norm[2] - norm[1]) / step == pytest.approx(40.0, rel=1e-5)
