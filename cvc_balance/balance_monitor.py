@@ -33,6 +33,7 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
+from cvc_balance import topics
 from cvc_balance.assessment import assess_balance
 from cvc_balance.cdr import WrenchStampedEncoder
 from cvc_balance.engine import RotorModel, sample_loads
@@ -41,14 +42,13 @@ from cvc_balance.layout import LayoutError
 from cvc_balance.layout_file import layout_from_text, load_layout
 from cvc_balance.motion import AccelerationEstimator, AngleIntegrator, sample_problem
 from cvc_balance.recorder import BagRecorder
-from cvc_balance.unbalance import couple_unbalance, static_unbalance
+from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
 LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 OUTPUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 1.0
-WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
 
 
 def input_qos(depth):
@@ -106,7 +106,7 @@ class ActiveLayout:
         self.static = static_unbalance(self.model)
         self.couple = couple_unbalance(self.model)
         self.supports = tuple(
-            (s.name, node.publisher(f'supports/{s.name}/load')) for s in layout.supports)
+            (s.name, node.publisher(topics.support_load(s.name))) for s in layout.supports)
 
 
 class BalanceMonitor(Node):
@@ -117,10 +117,10 @@ class BalanceMonitor(Node):
         super().__init__('balance_monitor', **kwargs)
         self.params = self._declare_parameters()
         self._wrench_publishers = {}
-        self._bearing_pub = self.publisher('bearing_load')
-        self._unbalance_pub = self.publisher('unbalance')
-        self._torque_pub = self.publisher('drive_torque')
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._bearing_pub = self.publisher(topics.BEARING_LOAD)
+        self._unbalance_pub = self.publisher(topics.UNBALANCE)
+        self._torque_pub = self.publisher(topics.DRIVE_TORQUE)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         # Outputs go out as CDR bytes: 3 us a message instead of rclpy's 11 us.
         self._stator_cdr = WrenchStampedEncoder(self.params['stator_frame'])
         self._rotor_cdr = WrenchStampedEncoder(self.params['rotor_frame'])
@@ -137,10 +137,10 @@ class BalanceMonitor(Node):
         if self.params['layout_file']:
             self._apply_layout_file(self.params['layout_file'])
         sensor_qos = input_qos(self.params['input_depth'])
-        self.create_subscription(JointState, 'joint_states', self._on_joint_states,
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_states,
                                  sensor_qos)
-        self.create_subscription(Float64, 'speed', self._on_speed, sensor_qos)
-        self.create_subscription(String, 'layout', self._on_layout, LAYOUT_QOS)
+        self.create_subscription(Float64, topics.SPEED, self._on_speed, sensor_qos)
+        self.create_subscription(String, topics.LAYOUT, self._on_layout, LAYOUT_QOS)
         self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
         self._rerun = None
         if self.params['rerun']:
@@ -157,9 +157,10 @@ class BalanceMonitor(Node):
             # Inputs and diagnostics through raw subscriptions; the outputs are written as
             # they are published (no second trip through DDS).
             self._recorder = BagRecorder(self, self.params['record_path'],
-                                         ('joint_states', 'speed', 'layout', '/diagnostics'))
-            for topic in ('bearing_load', 'unbalance', 'drive_torque'):
-                self._record[topic] = self._recorder.add(topic, WRENCH_TYPE)
+                                         (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT,
+                                          topics.DIAGNOSTICS))
+            for topic in topics.OUTPUTS:
+                self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
 
     def destroy_node(self):
         """Finalise the recording, if any, then destroy the node."""
@@ -235,9 +236,7 @@ class BalanceMonitor(Node):
             if size > peak:
                 peak = size
         self._peak_load = peak
-        w2 = omega * omega
-        (u_x, u_y), (p_xz, p_yz) = active.static, active.couple
-        unbalance = rotor(sec, nanosec, (w2 * u_x, w2 * u_y, 0.0), (-w2 * p_yz, w2 * p_xz, 0.0))
+        unbalance = rotor(sec, nanosec, *unbalance_wrench(active.static, active.couple, omega))
         self._unbalance_pub.publish(unbalance)
         torque = rotor(sec, nanosec, (0.0, 0.0, 0.0), (0.0, 0.0, result.drive_torque))
         self._torque_pub.publish(torque)
@@ -252,14 +251,14 @@ class BalanceMonitor(Node):
     def _record_outputs(self, bearing, supports, unbalance, torque):
         now = self.get_clock().now().nanoseconds
         record = self._record
-        record['bearing_load'](now, bearing)
+        record[topics.BEARING_LOAD](now, bearing)
         for name, data in supports:
-            topic = f'supports/{name}/load'
+            topic = topics.support_load(name)
             if topic not in record:
-                record[topic] = self._recorder.add(topic, WRENCH_TYPE)
+                record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
             record[topic](now, data)
-        record['unbalance'](now, unbalance)
-        record['drive_torque'](now, torque)
+        record[topics.UNBALANCE](now, unbalance)
+        record[topics.DRIVE_TORQUE](now, torque)
 
     def _reject(self, reason):
         self._counts['rejected'] += 1

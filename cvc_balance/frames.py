@@ -66,6 +66,20 @@ def tensor_from_elements(ixx, iyy, izz, ixy, ixz, iyz):
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], dtype=float)
 
 
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(angle):
+    """
+    Angle(s) in rad brought to [-pi, pi] (nearest turn; math.remainder's convention).
+
+    A float stays in plain Python (the per-message path); arrays go through numpy.
+    """
+    if isinstance(angle, float):
+        return math.remainder(angle, TWO_PI)
+    return angle - TWO_PI * np.round(np.asarray(angle) / TWO_PI)
+
+
 def polar(x, y):
     """Amount and angle (rad, from X toward Y) of a planar vector."""
     return math.hypot(x, y), math.atan2(y, x)

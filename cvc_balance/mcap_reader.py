@@ -21,6 +21,7 @@ MAGIC = b'\x89MCAP0\r\n'
 OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
 MESSAGE_HEADER = 31
+_U64 = struct.Struct('<Q')
 
 
 class BagError(ValueError):
@@ -200,11 +201,11 @@ class Bag:
         """Return [(log time ns, bytes)] of a channel, in file order (for few messages)."""
         out = []
         for buffer, offsets in self.message_offsets(channel):
+            data = buffer.tobytes()          # once per chunk, then plain slices
             for offset in offsets.tolist():
-                length, = struct.unpack_from('<Q', buffer, offset + 1)
-                log_time, = struct.unpack_from('<Q', buffer, offset + 15)
-                out.append((log_time, buffer[offset + MESSAGE_HEADER:offset + 9 + length]
-                            .tobytes()))
+                (length,), (log_time,) = (_U64.unpack_from(data, offset + 1),
+                                          _U64.unpack_from(data, offset + 15))
+                out.append((log_time, data[offset + MESSAGE_HEADER:offset + 9 + length]))
         return out
 
 

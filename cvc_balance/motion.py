@@ -15,6 +15,8 @@ the update is O(1) and stays well conditioned for irregular sample times.
 
 import math
 
+from cvc_balance.frames import wrap_angle
+
 
 class AccelerationEstimator:
     """
@@ -76,7 +78,7 @@ class AngleIntegrator:
         if self._last is not None:
             last_time, last_omega = self._last
             self.angle += 0.5 * (omega + last_omega) * (time - last_time)
-            self.angle = math.remainder(self.angle, 2.0 * math.pi)
+            self.angle = wrap_angle(self.angle)
         self._last = (time, omega)
         return self.angle
 
@@ -113,39 +115,27 @@ def acceleration_series(time, omega, time_constant, block=None):
     if n == 0:
         return alpha
     span = 10.0 * time_constant if block is None else block
-    sums = np.zeros(5)          # S0, S1, S2, Sy, S1y about the block's origin c
-    origin = time[0]
+    # S0, S1, S2, Sy, S1y with weights as at time ``weighed``, moments about ``origin``.
+    sums, origin, weighed = np.zeros(5), time[0], time[0]
     start = 0
     while start < n:
-        stop = int(np.searchsorted(time, time[start] + span, side='right'))
-        stop = max(stop, start + 1)
-        # Move the carried sums to this block's origin (older samples only).
+        stop = max(int(np.searchsorted(time, time[start] + span, side='right')), start + 1)
+        # Carry the older samples to this block: age their weights, move the origin.
         shift = time[start] - origin
-        decay = np.exp(-shift / time_constant)
-        s0, s1, s2, sy, s1y = sums
-        sums = decay * np.array([s0, s1 - shift * s0, s2 - 2 * shift * s1 + shift * shift * s0,
-                                 sy, s1y - shift * sy])
+        s0, s1, s2, sy, s1y = np.exp(-(time[start] - weighed) / time_constant) * sums
+        carry = (s0, s1 - shift * s0, s2 - 2 * shift * s1 + shift * shift * s0, sy,
+                 s1y - shift * sy)
         origin = time[start]
         u = time[start:stop] - origin
         grow = np.exp(u / time_constant)
         y = omega[start:stop]
         terms = (grow, grow * u, grow * u * u, grow * y, grow * u * y)
-        shrink = 1.0 / grow
-        s0, s1, s2, sy, s1y = (shrink * (carry + np.cumsum(term))
-                               for carry, term in zip(sums, terms))
+        s0, s1, s2, sy, s1y = ((c + np.cumsum(term)) / grow for c, term in zip(carry, terms))
         spread = s0 * s2 - s1 * s1
         tt = s2 - 2 * u * s1 + u * u * s0          # the live estimator's threshold
         ok = (spread > 1e-12 * s0 * tt) & (spread > 0.0)
         alpha[start:stop] = np.where(ok, (s0 * s1y - s1 * sy) / np.where(ok, spread, 1.0), 0.0)
-        sums = np.array([s0[-1], s1[-1], s2[-1], sy[-1], s1y[-1]])
-        # The carried sums are now about this block's origin, at its last sample.
-        origin_time_of_sums = time[stop - 1]
-        shift_inside = origin_time_of_sums - origin
-        s0c, s1c, s2c, syc, s1yc = sums
-        sums = np.array([s0c, s1c - shift_inside * s0c,
-                         s2c - 2 * shift_inside * s1c + shift_inside ** 2 * s0c,
-                         syc, s1yc - shift_inside * syc])
-        origin = origin_time_of_sums
+        sums, weighed = np.array([s0[-1], s1[-1], s2[-1], sy[-1], s1y[-1]]), time[stop - 1]
         start = stop
     return alpha
 

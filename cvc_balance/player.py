@@ -19,39 +19,28 @@ import time
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from cvc_balance.mcap_reader import Bag, BagError, MESSAGE_HEADER
+from cvc_balance import topics
+from cvc_balance.mcap_reader import Bag, BagError
 from cvc_balance.recorder import message_class
 
 LAYOUT_PAUSE = 0.05
-
-
-def _raw_messages(bag, channel):
-    """[(log time ns, bytes)] of a channel (uses the numpy-located records)."""
-    out = []
-    for buffer, offsets in bag.message_offsets(channel):
-        data = buffer.tobytes()
-        for offset in offsets.tolist():
-            length = int.from_bytes(data[offset + 1:offset + 9], 'little')
-            log_time = int.from_bytes(data[offset + 15:offset + 23], 'little')
-            out.append((log_time, data[offset + MESSAGE_HEADER:offset + 9 + length]))
-    return out
 
 
 def output_topics(layout_texts):
     """Output topics of the node for the layouts a bag holds (their supports)."""
     from cvc_balance.layout import LayoutError
     from cvc_balance.layout_file import layout_from_text
-    topics = ['bearing_load', 'unbalance', 'drive_torque']
+    names = list(topics.OUTPUTS)
     for text in layout_texts:
         try:
             layout = layout_from_text(text)
         except LayoutError:
             continue
         for support in layout.supports:
-            topic = f'supports/{support.name}/load'
-            if topic not in topics:
-                topics.append(topic)
-    return topics
+            topic = topics.support_load(support.name)
+            if topic not in names:
+                names.append(topic)
+    return names
 
 
 def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5):
@@ -65,20 +54,21 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, s
         print(f'play: {bag_path}: {problem}')
     inputs = []
     for topic, msg_type, qos in (
-            ('joint_states', 'sensor_msgs/msg/JointState', input_qos(1000)),
-            ('speed', 'std_msgs/msg/Float64', input_qos(1000)),
-            ('layout', 'std_msgs/msg/String',
+            (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, input_qos(1000)),
+            (topics.SPEED, topics.FLOAT64_TYPE, input_qos(1000)),
+            (topics.LAYOUT, topics.STRING_TYPE,
              QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL))):
         channel = bag.channel(topic, msg_type)
         if channel is not None:
-            inputs.append((topic, msg_type, qos, _raw_messages(bag, channel)))
-    if not any(topic in ('joint_states', 'speed') for topic, *_ in inputs):
+            inputs.append((topic, msg_type, qos, bag.messages(channel)))
+    motions = (topics.JOINT_STATES, topics.SPEED)
+    if not any(topic in motions for topic, *_ in inputs):
         raise BagError(f'{bag_path}: no joint_states or speed topic to play; the bag has: '
                        + ', '.join(sorted(bag.topics())))
-    layouts = [data for topic, _, _, messages in inputs if topic == 'layout'
+    layouts = [data for topic, _, _, messages in inputs if topic == topics.LAYOUT
                for _, data in messages]
-    topics = output_topics([read_string_message(data) for data in layouts])
+    outputs = output_topics([read_string_message(data) for data in layouts])
     rclpy.init()
     node = rclpy.create_node('cvc_balance_player')
     publishers = {topic: node.create_publisher(message_class(msg_type), topic, qos)
@@ -90,18 +80,18 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, s
     recorder = None
     if output:
         recorder = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'record', '-o',
-                                     str(output), '--ready-when', topics[0], *topics],
+                                     str(output), '--ready-when', outputs[0], *outputs],
                                     stdout=subprocess.PIPE, text=True)
-    motion = 'joint_states' if 'joint_states' in publishers else 'speed'
+    motion = topics.JOINT_STATES if topics.JOINT_STATES in publishers else topics.SPEED
     if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait_for_subscriber):
         print(f'play: nobody subscribes to {motion}; publishing anyway')
-    first_sample = next(i for i, (_, topic, _) in enumerate(events) if topic != 'layout')
+    first_sample = next(i for i, (_, topic, _) in enumerate(events) if topic != topics.LAYOUT)
     for log_time, topic, data in events[:first_sample]:
         publishers[topic].publish(data)          # the layouts in force from the start
     if recorder is not None and recorder.stdout.readline().strip() != 'ready':
         print('play: the recorder did not get ready; recording anyway')
-    if first_sample and topics[3:]:
-        _wait(lambda: node.count_publishers(topics[3]) > 0, wait_for_subscriber)
+    if first_sample and outputs[3:]:     # the first layout's supports are being published
+        _wait(lambda: node.count_publishers(outputs[3]) > 0, wait_for_subscriber)
     # DDS matching is one-sided: what this side sees, the other may see a moment later.
     time.sleep(settle)
     published, start_log = first_sample, events[first_sample][0]
@@ -112,7 +102,7 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, s
             time.sleep(left)
         publishers[topic].publish(data)
         published += 1
-        if topic == 'layout':
+        if topic == topics.LAYOUT:
             time.sleep(LAYOUT_PAUSE)
             start_wall += LAYOUT_PAUSE
     report = None

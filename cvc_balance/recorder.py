@@ -14,14 +14,14 @@ import importlib
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from cvc_balance import topics
 from cvc_balance.mcap_writer import BagWriter
 
-DEFAULT_TOPICS = ('joint_states', 'speed', 'layout', 'bearing_load', 'unbalance',
-                  'drive_torque', 'supports/*/load', '/diagnostics')
-KNOWN_TYPES = {'joint_states': 'sensor_msgs/msg/JointState', 'speed': 'std_msgs/msg/Float64',
-               'layout': 'std_msgs/msg/String',
-               'diagnostics': 'diagnostic_msgs/msg/DiagnosticArray'}
-WRENCH = 'geometry_msgs/msg/WrenchStamped'
+DEFAULT_TOPICS = (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT, *topics.OUTPUTS,
+                  topics.support_load('*'), topics.DIAGNOSTICS)
+KNOWN_TYPES = {topics.JOINT_STATES: topics.JOINT_STATE_TYPE,
+               topics.SPEED: topics.FLOAT64_TYPE, topics.LAYOUT: topics.STRING_TYPE,
+               topics.DIAGNOSTICS.strip('/'): topics.DIAGNOSTIC_ARRAY_TYPE}
 
 
 def message_class(msg_type):
@@ -33,21 +33,22 @@ def message_class(msg_type):
 class BagRecorder:
     """Record topics of a node's graph to ``path`` (see the module's description)."""
 
-    def __init__(self, node, path, topics=DEFAULT_TOPICS, compression='zstd',
+    def __init__(self, node, path, names=DEFAULT_TOPICS, compression='zstd',
                  chunk_bytes=1 << 20):
-        """Subscribe ``node`` to ``topics`` (names, or patterns with '*'), write ``path``."""
+        """Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``."""
         self.node = node
         self.writer = BagWriter(path, compression=compression, chunk_bytes=chunk_bytes)
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
-        for topic in topics:
+        for topic in names:
             name = node.resolve_topic_name(topic) if '*' not in topic else topic
             if '*' in topic:
                 self._patterns.append(topic if topic.startswith('/') else
                                       node.resolve_topic_name('x')[:-1] + topic)
             else:
-                self._subscribe(name, KNOWN_TYPES.get(name.rsplit('/', 1)[-1], WRENCH))
+                self._subscribe(name, KNOWN_TYPES.get(name.rsplit('/', 1)[-1],
+                                                      topics.WRENCH_TYPE))
         self._timer = node.create_timer(0.2, self.discover) if self._patterns else None
 
     def discover(self):
@@ -74,8 +75,8 @@ class BagRecorder:
 
     def _subscribe(self, name, msg_type):
         short = name.rsplit('/', 1)[-1]
-        latched = short == 'layout'
-        best_effort = short in ('joint_states', 'speed')
+        latched = short == topics.LAYOUT
+        best_effort = short in (topics.JOINT_STATES, topics.SPEED)
         channel = self.writer.add_channel(name, msg_type, latched=latched,
                                           best_effort=best_effort)
         qos = QoSProfile(depth=1000,

@@ -13,22 +13,21 @@ import time
 
 import numpy as np
 
+from cvc_balance import topics
 from cvc_balance.assessment import assess_balance
 from cvc_balance.cdr import string_message, wrench_stamped_layout
 from cvc_balance.engine import loads, RotorModel
-from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
 from cvc_balance.layout import LayoutError
 from cvc_balance.layout_file import layout_from_text
 from cvc_balance.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
                                      MotionSamples, string_samples)
 from cvc_balance.mcap_writer import BagWriter, MessageBlock
 from cvc_balance.motion import acceleration_series, accepted_samples
-from cvc_balance.unbalance import couple_unbalance, static_unbalance
+from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
-JOINT_STATE = 'sensor_msgs/msg/JointState'
-FLOAT64 = 'std_msgs/msg/Float64'
-STRING = 'std_msgs/msg/String'
-WRENCH = 'geometry_msgs/msg/WrenchStamped'
+JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
+STRING, WRENCH = topics.STRING_TYPE, topics.WRENCH_TYPE
 BLOCK = 1 << 16
 SUB = 1 << 14
 """Samples per message block filled at once: its bytes stay in cache."""
@@ -70,21 +69,21 @@ def read_inputs(bag, joint_name):
     (std_msgs/Float64, angle integrated over log times as the node does over
     receive times). Raises BagError when the bag has neither.
     """
-    joints = bag.channel('joint_states', JOINT_STATE)
-    speed = bag.channel('speed', FLOAT64)
+    joints = bag.channel(topics.JOINT_STATES, JOINT_STATE)
+    speed = bag.channel(topics.SPEED, FLOAT64)
     if joints is not None:
         motion = joint_samples(bag, joints, joint_name)
     elif speed is not None:
         log_time, omega = float64_samples(bag, speed)
         t = log_time * 1e-9
         steps = np.concatenate([[0.0], 0.5 * (omega[1:] + omega[:-1]) * np.diff(t)])
-        angle = np.remainder(np.cumsum(steps) + math.pi, 2 * math.pi) - math.pi
+        angle = wrap_angle(np.cumsum(steps))
         motion = MotionSamples(log_time, log_time, angle, omega)
     else:
-        topics = ', '.join(f'{t} ({m})' for t, m in sorted(bag.topics().items())) or 'none'
+        found = ', '.join(f'{t} ({m})' for t, m in sorted(bag.topics().items())) or 'none'
         raise BagError(f'{bag.path}: no joint_states ({JOINT_STATE}) or speed ({FLOAT64}) '
-                       f'topic; the bag has: {topics}')
-    layout_channel = bag.channel('layout', STRING)
+                       f'topic; the bag has: {found}')
+    layout_channel = bag.channel(topics.LAYOUT, STRING)
     layouts = string_samples(bag, layout_channel) if layout_channel is not None else []
     return motion, layouts
 
@@ -179,11 +178,10 @@ def _layout_text(messages, log_time, layout_file):
 
 
 def _output_channels(writer):
-    return {'layout': writer.add_channel('/layout', STRING, latched=True),
-            'bearing_load': writer.add_channel('/bearing_load', WRENCH),
-            'unbalance': writer.add_channel('/unbalance', WRENCH),
-            'drive_torque': writer.add_channel('/drive_torque', WRENCH),
-            'supports': {}}
+    channels = {topic: writer.add_channel(f'/{topic}', WRENCH) for topic in topics.OUTPUTS}
+    channels.update(layout=writer.add_channel(f'/{topics.LAYOUT}', STRING, latched=True),
+                    supports={})
+    return channels
 
 
 class OutputBlocks:
@@ -194,11 +192,11 @@ class OutputBlocks:
         supports = channels['supports']
         for s in model.supports:
             if s.name not in supports:
-                supports[s.name] = writer.add_channel(f'/supports/{s.name}/load', WRENCH)
+                supports[s.name] = writer.add_channel(f'/{topics.support_load(s.name)}', WRENCH)
         stator, rotor = wrench_stamped_layout(STATOR_FRAME), wrench_stamped_layout(ROTOR_FRAME)
-        parts = [(channels['bearing_load'], stator)]
+        parts = [(channels[topics.BEARING_LOAD], stator)]
         parts += [(supports[s.name], stator) for s in model.supports]
-        parts += [(channels['unbalance'], rotor), (channels['drive_torque'], rotor)]
+        parts += [(channels[topics.UNBALANCE], rotor), (channels[topics.DRIVE_TORQUE], rotor)]
         self.writer, self.model = writer, model
         self.block = MessageBlock(parts, SUB)
         self.static, self.couple = static_unbalance(model), couple_unbalance(model)
@@ -209,14 +207,12 @@ class OutputBlocks:
         wrenches = [(result.force_stator, result.moment_stator)]
         wrenches += [(result.support_force[s.name], result.support_moment[s.name])
                      for s in model.supports]
-        (u_x, u_y), (p_xz, p_yz) = self.static, self.couple
         sec_all, nanosec_all = np.divmod(stamp, 1_000_000_000)
-        w2_all = omega * omega
         fields = self.block.fields
         for a in range(0, len(stamp), SUB):
             b = min(a + SUB, len(stamp))
             n = b - a
-            sec, nanosec, w2 = sec_all[a:b], nanosec_all[a:b], w2_all[a:b]
+            sec, nanosec = sec_all[a:b], nanosec_all[a:b]
             g_last = len(wrenches) + 1
             for g in range(g_last + 1):
                 fields[f'{g}.sec'][:n], fields[f'{g}.nanosec'][:n] = sec, nanosec
@@ -225,8 +221,10 @@ class OutputBlocks:
                     fields[f'{g}.force_{axis}'][:n] = force[a:b, i]
                     fields[f'{g}.torque_{axis}'][:n] = torque[a:b, i]
             g = len(wrenches)          # unbalance: U omega^2, couple moment
-            fields[f'{g}.force_x'][:n], fields[f'{g}.force_y'][:n] = w2 * u_x, w2 * u_y
-            fields[f'{g}.torque_x'][:n], fields[f'{g}.torque_y'][:n] = -w2 * p_yz, w2 * p_xz
+            force, torque = unbalance_wrench(self.static, self.couple, omega[a:b])
+            for i, axis in enumerate('xy'):
+                fields[f'{g}.force_{axis}'][:n] = force[i]
+                fields[f'{g}.torque_{axis}'][:n] = torque[i]
             fields[f'{g_last}.torque_z'][:n] = result.drive_torque[a:b]
             self.writer.write_block(self.block, log_time[a:b], n)
 

@@ -26,6 +26,7 @@ import rerun.blueprint as rrb
 
 from cvc_balance.assessment import assess_balance
 from cvc_balance.iso21940 import permissible_unbalance
+from cvc_balance.unbalance import static_unbalance, unbalance_wrench
 
 TIMELINE = 'time'
 NEWTONS_PER_METRE = 20000.0
@@ -163,7 +164,7 @@ class RunLogger:
             rotation_axis_angle=[rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(q))
                                  for q in angle]), recording=rec)
         # Arrows: a subset of the samples (a viewer need not draw them all).
-        u_x, u_y = model.s_x, model.s_y
+        static = static_unbalance(model)
         for k in range(0, len(omega), every):
             rec.set_time(TIMELINE, timestamp=stamp_ns[k] * 1e-9)
             origins = [[0.0, 0.0, s.z] for s in model.supports]
@@ -172,11 +173,10 @@ class RunLogger:
             rec.log('world/stator/loads',
                     rr.Arrows3D(origins=origins, vectors=vectors, colors=[(220, 120, 0)]))
             # The static unbalance's centrifugal force, U omega^2, turns with the rotor.
-            w2 = float(omega[k]) ** 2
+            force, _ = unbalance_wrench(static, (0.0, 0.0), float(omega[k]))
             rec.log('world/rotor/unbalance_force', rr.Arrows3D(
                 origins=[[0.0, 0.0, model.s_z / model.mass]],
-                vectors=[[w2 * u_x / UNBALANCE_NEWTONS_PER_METRE,
-                          w2 * u_y / UNBALANCE_NEWTONS_PER_METRE, 0.0]],
+                vectors=[[f / UNBALANCE_NEWTONS_PER_METRE for f in force]],
                 colors=[(230, 30, 30)]))
 
 

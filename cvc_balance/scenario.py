@@ -32,7 +32,7 @@ import numpy as np
 import yaml
 
 from cvc_balance.cdr import joint_state_layout, string_message
-from cvc_balance.frames import radians, STANDARD_GRAVITY
+from cvc_balance.frames import radians, STANDARD_GRAVITY, wrap_angle
 from cvc_balance.layout import LayoutError, parse_layout
 from cvc_balance.mcap_writer import BagWriter, MessageBlock
 
@@ -52,18 +52,17 @@ class Scenario:
     time: np.ndarray       # s from the start
     angle: np.ndarray      # rad, exact
     omega: np.ndarray      # rad/s, exact
-    alpha: np.ndarray      # rad/s^2, exact
     layouts: list          # [(time s, layout mapping)]
     noise_angle: float
     noise_speed: float
     seed: int
 
     def measured(self):
-        """Return the encoder's angle (wrapped to (-pi, pi]) and speed: motion plus noise."""
+        """Return the encoder's angle (wrapped to [-pi, pi]) and speed: motion plus noise."""
         rng = np.random.default_rng(self.seed)
         angle = self.angle + rng.normal(0.0, self.noise_angle, len(self.time))
         omega = self.omega + rng.normal(0.0, self.noise_speed, len(self.time))
-        return np.remainder(angle + math.pi, 2 * math.pi) - math.pi, omega
+        return wrap_angle(angle), omega
 
     def stamps_ns(self):
         """Sample stamps, ns."""
@@ -95,11 +94,11 @@ def load_scenario(path):
     rate = float(spec.get('rate', 500.0))
     if not rate > 0:
         raise ScenarioError(f'{path}: field rate must be > 0')
-    time, angle, omega, alpha = _motion(spec.get('profile') or [], rate, path)
+    time, angle, omega = _motion(spec.get('profile') or [], rate, path)
     layouts = _layouts(layout, spec.get('events') or [], path)
     noise = spec.get('noise') or {}
     return Scenario(str(spec.get('name', path.stem)), str(spec.get('joint_name', 'gantry_joint')),
-                    rate, float(spec.get('start', 1.0)), time, angle, omega, alpha, layouts,
+                    rate, float(spec.get('start', 1.0)), time, angle, omega, layouts,
                     float(noise.get('angle', 0.0)), float(noise.get('speed', 0.0)),
                     int(spec.get('seed', 0)))
 
@@ -126,18 +125,17 @@ def _motion(profile, rate, path):
         raise ScenarioError(f'{path}: field profile: needs at least one step')
     total = sum(d for d, _ in pieces)
     time = np.arange(int(total * rate) + 1) / rate
-    angle, omega_t, alpha_t = np.zeros_like(time), np.zeros_like(time), np.zeros_like(time)
+    angle, omega_t = np.zeros_like(time), np.zeros_like(time)
     t0 = q0 = w0 = 0.0
     for duration, alpha in pieces:
         inside = (time >= t0) & (time <= t0 + duration)
         dt = time[inside] - t0
         angle[inside] = q0 + w0 * dt + 0.5 * alpha * dt * dt
         omega_t[inside] = w0 + alpha * dt
-        alpha_t[inside] = alpha
         q0 += w0 * duration + 0.5 * alpha * duration * duration
         w0 += alpha * duration
         t0 += duration
-    return time, angle, omega_t, alpha_t
+    return time, angle, omega_t
 
 
 def _layouts(layout, events, path):

@@ -46,6 +46,20 @@ class PlaneUnbalance:
         return self.amount * math.cos(self.angle), self.amount * math.sin(self.angle)
 
 
+def unbalance_wrench(static, couple, omega):
+    """
+    Return the unbalance's load at speed ``omega``, rotor frame: (force, torque).
+
+    Force U omega^2 (static unbalance ``static`` = (U_x, U_y), kg m); torque
+    omega^2 (-P_yz, P_xz, 0), the couple ``couple`` = (P_xz, P_yz) about the centre of
+    mass (kg m^2), with the signs of the engine's bearing moment. Plain arithmetic:
+    floats (the node) or arrays (replay).
+    """
+    w2 = omega * omega
+    (u_x, u_y), (p_xz, p_yz) = static, couple
+    return (w2 * u_x, w2 * u_y, 0.0), (-w2 * p_yz, w2 * p_xz, 0.0)
+
+
 def static_unbalance(model):
     """(U_x, U_y) = int r_xy dm, kg m, rotor frame."""
     return model.s_x, model.s_y

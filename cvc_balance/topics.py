@@ -1,0 +1,28 @@
+"""
+The node's topics: names (relative, so namespaces and remapping work) and message types.
+
+One place for them: the node publishes them, replay writes them to bags, play and
+record subscribe to them.
+"""
+
+JOINT_STATES = 'joint_states'
+SPEED = 'speed'
+LAYOUT = 'layout'
+BEARING_LOAD = 'bearing_load'
+UNBALANCE = 'unbalance'
+DRIVE_TORQUE = 'drive_torque'
+DIAGNOSTICS = '/diagnostics'
+
+JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
+FLOAT64_TYPE = 'std_msgs/msg/Float64'
+STRING_TYPE = 'std_msgs/msg/String'
+WRENCH_TYPE = 'geometry_msgs/msg/WrenchStamped'
+DIAGNOSTIC_ARRAY_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
+
+OUTPUTS = (BEARING_LOAD, UNBALANCE, DRIVE_TORQUE)
+"""The outputs every layout has; each support adds :func:`support_load`."""
+
+
+def support_load(name):
+    """Return the topic of a support's load."""
+    return f'supports/{name}/load'
