@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cvc_balance import compensated as dd
 from cvc_balance.frames import tensor_from_elements
 
 SHAPE_AXES = ('radial', 'tangential', 'axial')
@@ -86,21 +87,47 @@ def place(mass, inertia_own, radius, angle, z):
     (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one);
     ``mass``, ``radius`` (m), ``angle`` (rad) and ``z`` (m) are (n,) or
     scalars. Vectorised: the cost is a few numpy calls whatever n is.
+
+    The terms are those of :func:`parallel_axis_cvc` (the own tensor turned by
+    theta, plus the shift), evaluated and summed in double-double
+    (:mod:`cvc_balance.compensated`): each aggregate is within an ulp or so of
+    the exact sum for the given numbers, so a layout balanced to 1e-9 of its mass
+    moment keeps its residual unbalance to ~1e-16, not ~1e-7.
     """
     mass = np.atleast_1d(np.asarray(mass, dtype=float))
     radius = np.broadcast_to(np.asarray(radius, dtype=float), mass.shape)
     angle = np.broadcast_to(np.asarray(angle, dtype=float), mass.shape)
     z = np.broadcast_to(np.asarray(z, dtype=float), mass.shape)
-    inertia_own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
-    c, s = np.cos(angle), np.sin(angle)
-    # Own frame -> rotor frame axes: R(theta) I R(theta)^T, element by element.
-    rot = np.zeros(mass.shape + (3, 3))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
-    rot[:, 2, 2] = 1.0
-    inertia_com = rot @ inertia_own @ np.swapaxes(rot, 1, 2)
-    about_o = parallel_axis_cvc(inertia_com, mass, radius, angle, z)
-    first = np.stack([mass * radius * c, mass * radius * s, mass * z], axis=1)
-    return MassProperties(float(mass.sum()), first.sum(axis=0), about_o.sum(axis=0))
+    own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
+    c, s = dd.cos_sin(angle)
+    x, y = dd.scale(c, radius), dd.scale(s, radius)          # centre of mass, rotor frame
+    first = [dd.scale(x, mass), dd.scale(y, mass), dd.product(mass, z)]
+    # Own tensor turned by theta about Z (R I R^T), element by element.
+    cc, ss, cs = dd.mul(c, c), dd.mul(s, s), dd.mul(c, s)
+    o_xx, o_yy, o_zz = own[:, 0, 0], own[:, 1, 1], own[:, 2, 2]
+    o_xy, o_xz, o_yz = own[:, 0, 1], own[:, 0, 2], own[:, 1, 2]
+    two_cs_xy = dd.scale(cs, 2.0 * o_xy)
+    turned_xx = dd.add(dd.add(dd.scale(cc, o_xx), dd.scale(ss, o_yy)), dd.negate(two_cs_xy))
+    turned_yy = dd.add(dd.add(dd.scale(ss, o_xx), dd.scale(cc, o_yy)), two_cs_xy)
+    turned_xy = dd.add(dd.scale(cs, o_xx - o_yy), dd.scale(dd.add(cc, dd.negate(ss)), o_xy))
+    turned_xz = dd.add(dd.scale(c, o_xz), dd.negate(dd.scale(s, o_yz)))
+    turned_yz = dd.add(dd.scale(s, o_xz), dd.scale(c, o_yz))
+    # The shift to O (tensor elements: products enter with a minus sign).
+    m_x2, m_y2 = dd.mul(first[0], x), dd.mul(first[1], y)
+    m_z2 = dd.scale(first[2], z)
+    elements = {
+        (0, 0): dd.add(turned_xx, dd.add(m_y2, m_z2)),
+        (1, 1): dd.add(turned_yy, dd.add(m_x2, m_z2)),
+        (2, 2): dd.add((o_zz, np.zeros_like(o_zz)), dd.scale(dd.product(radius, radius), mass)),
+        (0, 1): dd.add(turned_xy, dd.negate(dd.mul(first[0], y))),
+        (0, 2): dd.add(turned_xz, dd.negate(dd.scale(first[0], z))),
+        (1, 2): dd.add(turned_yz, dd.negate(dd.scale(first[1], z))),
+    }
+    inertia = np.zeros((3, 3))
+    for (i, j), value in elements.items():
+        inertia[i, j] = inertia[j, i] = dd.total(value)
+    total_mass = dd.total((mass, np.zeros_like(mass)))
+    return MassProperties(total_mass, np.array([dd.total(v) for v in first]), inertia)
 
 
 def solid_cylinder(mass, radius, length, axis='axial'):

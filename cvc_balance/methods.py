@@ -175,6 +175,25 @@ def euler_zxz_compute(bodies, q, omega, alpha, gravity):
                          lambda q, theta: _rz(q) @ _rx(zero) @ _rz(np.full(len(q), theta)))
 
 
+def zxz_angle_rates(precession, nutation, spin, omega_body):
+    """
+    Rates of ZXZ Euler angles (rad/s) from a body's angular velocity (body frame, rad/s).
+
+    What a method that carries orientation as Euler angles must integrate. The
+    inverse of omega = (p' sin(n) sin(s) + n' cos(s), p' sin(n) cos(s) - n' sin(s),
+    p' cos(n) + s') divides by sin(nutation): at nutation 0 or pi (gimbal lock,
+    thesis Sec. 6.2) precession and spin turn about one axis and the rates are
+    0/0 (nan); near it, cross rates are amplified by 1 / sin(nutation).
+    """
+    w_x, w_y, w_z = omega_body
+    sin_s, cos_s = np.sin(spin), np.cos(spin)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        precession_rate = (w_x * sin_s + w_y * cos_s) / np.sin(nutation)
+    nutation_rate = w_x * cos_s - w_y * sin_s
+    spin_rate = w_z - precession_rate * np.cos(nutation)
+    return np.array([precession_rate, nutation_rate, spin_rate])
+
+
 # -- rigid bodies cut into particles ----------------------------------------------------
 
 def particle_cloud(component, n):
