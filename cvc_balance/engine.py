@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from cvc_balance import inertia as shapes
-from cvc_balance.frames import products_of_inertia, tensor_from_elements, turn_xy
+from cvc_balance.frames import (products_of_inertia, tensor_from_elements,
+                                tensors_from_elements, turn_xy)
 from cvc_balance.inertia import place
 from cvc_balance.workers import pool
 
@@ -40,7 +41,10 @@ class RotorModel:
     A layout's aggregates about O in the rotor frame, computed once.
 
     ``body`` holds the full mass properties; the scalars below are what the
-    per-sample equations read (kg, kg m, kg m^2, m/s^2).
+    per-sample equations read (kg, kg m, kg m^2, m/s^2). A reduced model
+    (:mod:`cvc_balance.model_choice`) has ``own_inertia`` False (components
+    taken as point masses) or ``moments`` False (the bearing-moment terms not
+    evaluated: M_x = M_y = 0 about O).
     """
 
     layout: object
@@ -53,18 +57,27 @@ class RotorModel:
     p_yz: float
     i_zz: float
     gravity: tuple
+    own_inertia: bool = True
+    moments: bool = True
 
     @classmethod
-    def from_layout(cls, layout):
-        """Aggregate a validated :class:`cvc_balance.layout.Layout`."""
+    def from_layout(cls, layout, own_inertia=True, moments=True, own_tensors=None):
+        """
+        Aggregate a validated :class:`cvc_balance.layout.Layout`.
+
+        ``own_tensors``: the components' own tensors, (n, 3, 3), when already
+        computed (:func:`own_tensors_of`).
+        """
         comps = layout.components
-        body = place([c.mass for c in comps], np.array([own_inertia(c) for c in comps]),
-                     [c.radius for c in comps], [c.angle for c in comps],
-                     [c.z for c in comps])
+        if own_inertia and own_tensors is None:
+            own_tensors = own_tensors_of(comps)
+        mass, radius, angle, z = layout.placement
+        body = place(mass, own_tensors if own_inertia else None, radius, angle, z)
         s_x, s_y, s_z = (float(v) for v in body.first_moment)
         _, p_xz, p_yz = (float(v) for v in products_of_inertia(body.inertia))
         return cls(layout, body, body.mass, s_x, s_y, s_z, p_xz, p_yz,
-                   float(body.inertia[2, 2]), tuple(float(g) for g in layout.gravity))
+                   float(body.inertia[2, 2]), tuple(float(g) for g in layout.gravity),
+                   own_inertia, moments)
 
     @property
     def supports(self):
@@ -72,21 +85,36 @@ class RotorModel:
         return self.layout.supports
 
 
+def own_tensors_of(components):
+    """Return the components' own inertia tensors, (n, 3, 3) (kg m^2)."""
+    return tensors_from_elements([own_elements(c) for c in components])
+
+
 def own_inertia(component):
     """Return a component's inertia tensor about its centre of mass, own frame (kg m^2)."""
+    return tensor_from_elements(*own_elements(component))
+
+
+def own_elements(component):
+    """
+    Return a component's own tensor elements (ixx, iyy, izz, ixy, ixz, iyz), kg m^2.
+
+    About its centre of mass, own (radial, tangential, axial) frame; plain floats.
+    """
     if component.inertia is not None:
-        return tensor_from_elements(*component.inertia)
+        return tuple(component.inertia)
     shape = component.shape
     if shape is None or shape.type == 'point':
-        return np.zeros((3, 3))
+        return (0.0,) * 6
     m = component.mass
     if shape.type == 'cylinder':
-        return shapes.solid_cylinder(m, shape.radius, shape.length, shape.axis)
+        return shapes.solid_cylinder_elements(m, shape.radius, shape.length, shape.axis)
     if shape.type == 'tube':
-        return shapes.tube(m, shape.inner_radius, shape.outer_radius, shape.length, shape.axis)
+        return shapes.tube_elements(m, shape.inner_radius, shape.outer_radius, shape.length,
+                                    shape.axis)
     if shape.type == 'box':
-        return shapes.box(m, shape.size)
-    return shapes.sphere(m, shape.radius)
+        return shapes.box_elements(m, shape.size)
+    return shapes.sphere_elements(m, shape.radius)
 
 
 def rotor_frame_loads(model, cos_q, sin_q, omega, alpha, gravity):
@@ -104,8 +132,11 @@ def rotor_frame_loads(model, cos_q, sin_q, omega, alpha, gravity):
     f_x = m * gr_x + w2 * s_x + alpha * s_y
     f_y = m * gr_y + w2 * s_y - alpha * s_x
     f_z = m * g_z
-    m_x = s_y * g_z - s_z * gr_y + alpha * model.p_xz - w2 * model.p_yz
-    m_y = s_z * gr_x - s_x * g_z + alpha * model.p_yz + w2 * model.p_xz
+    if model.moments:
+        m_x = s_y * g_z - s_z * gr_y + alpha * model.p_xz - w2 * model.p_yz
+        m_y = s_z * gr_x - s_x * g_z + alpha * model.p_yz + w2 * model.p_xz
+    else:
+        m_x = m_y = 0.0
     torque = model.i_zz * alpha - (s_x * gr_y - s_y * gr_x)
     return f_x, f_y, f_z, m_x, m_y, torque
 
@@ -208,7 +239,7 @@ def loads(model, q, omega, alpha=0.0, gravity=None):
         f_x, f_y, f_z, m_x, m_y, torque = rotor_frame_loads(
             model, cos_q, sin_q, omega[part], alpha[part], g_part)
         fs_x, fs_y = turn_xy(f_x, f_y, cos_q, sin_q)
-        ms_x, ms_y = turn_xy(m_x, m_y, cos_q, sin_q)
+        ms_x, ms_y = turn_xy(m_x, m_y, cos_q, sin_q) if model.moments else (0.0, 0.0)
         rows = [f_x, f_y, f_z, m_x, m_y, 0.0, fs_x, fs_y, f_z, ms_x, ms_y, 0.0, torque]
         for force, moment in support_loads(model.supports, fs_x, fs_y, f_z, ms_x, ms_y):
             rows.extend(force)

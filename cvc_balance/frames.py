@@ -66,6 +66,15 @@ def tensor_from_elements(ixx, iyy, izz, ixy, ixz, iyz):
     return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], dtype=float)
 
 
+def tensors_from_elements(elements):
+    """Stack of 3x3 tensors (n, 3, 3) from rows of elements (n, 6), as above."""
+    elements = np.asarray(elements, dtype=float).reshape(-1, 6)
+    tensors = np.empty((len(elements), 3, 3))
+    for k, (i, j) in enumerate(((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+        tensors[:, i, j] = tensors[:, j, i] = elements[:, k]
+    return tensors
+
+
 TWO_PI = 2.0 * math.pi
 
 

@@ -84,7 +84,8 @@ def place(mass, inertia_own, radius, angle, z):
     Bodies placed on the rotor at (R, theta, z), summed into one value.
 
     ``inertia_own`` is each body's tensor about its centre of mass in its own
-    (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one);
+    (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one),
+    or None for point masses;
     ``mass``, ``radius`` (m), ``angle`` (rad) and ``z`` (m) are (n,) or
     scalars. Vectorised: the cost is a few numpy calls whatever n is.
 
@@ -98,11 +99,33 @@ def place(mass, inertia_own, radius, angle, z):
     radius = np.broadcast_to(np.asarray(radius, dtype=float), mass.shape)
     angle = np.broadcast_to(np.asarray(angle, dtype=float), mass.shape)
     z = np.broadcast_to(np.asarray(z, dtype=float), mass.shape)
-    own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
     c, s = dd.cos_sin(angle)
     x, y = dd.scale(c, radius), dd.scale(s, radius)          # centre of mass, rotor frame
     first = [dd.scale(x, mass), dd.scale(y, mass), dd.product(mass, z)]
-    # Own tensor turned by theta about Z (R I R^T), element by element.
+    # The shift to O (tensor elements: products enter with a minus sign).
+    m_x2, m_y2 = dd.mul(first[0], x), dd.mul(first[1], y)
+    m_z2 = dd.scale(first[2], z)
+    elements = {
+        (0, 0): dd.add(m_y2, m_z2),
+        (1, 1): dd.add(m_x2, m_z2),
+        (2, 2): dd.scale(dd.product(radius, radius), mass),
+        (0, 1): dd.negate(dd.mul(first[0], y)),
+        (0, 2): dd.negate(dd.scale(first[0], z)),
+        (1, 2): dd.negate(dd.scale(first[1], z)),
+    }
+    if inertia_own is not None:
+        own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
+        for key, turned in _turned_elements(own, c, s).items():
+            elements[key] = dd.add(elements[key], turned)
+    inertia = np.zeros((3, 3))
+    for (i, j), value in elements.items():
+        inertia[i, j] = inertia[j, i] = dd.total(value)
+    total_mass = dd.total((mass, np.zeros_like(mass)))
+    return MassProperties(total_mass, np.array([dd.total(v) for v in first]), inertia)
+
+
+def _turned_elements(own, c, s):
+    """Own tensors turned by theta about Z (R I R^T), element by element, double-double."""
     cc, ss, cs = dd.mul(c, c), dd.mul(s, s), dd.mul(c, s)
     o_xx, o_yy, o_zz = own[:, 0, 0], own[:, 1, 1], own[:, 2, 2]
     o_xy, o_xz, o_yz = own[:, 0, 1], own[:, 0, 2], own[:, 1, 2]
@@ -112,26 +135,18 @@ def place(mass, inertia_own, radius, angle, z):
     turned_xy = dd.add(dd.scale(cs, o_xx - o_yy), dd.scale(dd.add(cc, dd.negate(ss)), o_xy))
     turned_xz = dd.add(dd.scale(c, o_xz), dd.negate(dd.scale(s, o_yz)))
     turned_yz = dd.add(dd.scale(s, o_xz), dd.scale(c, o_yz))
-    # The shift to O (tensor elements: products enter with a minus sign).
-    m_x2, m_y2 = dd.mul(first[0], x), dd.mul(first[1], y)
-    m_z2 = dd.scale(first[2], z)
-    elements = {
-        (0, 0): dd.add(turned_xx, dd.add(m_y2, m_z2)),
-        (1, 1): dd.add(turned_yy, dd.add(m_x2, m_z2)),
-        (2, 2): dd.add((o_zz, np.zeros_like(o_zz)), dd.scale(dd.product(radius, radius), mass)),
-        (0, 1): dd.add(turned_xy, dd.negate(dd.mul(first[0], y))),
-        (0, 2): dd.add(turned_xz, dd.negate(dd.scale(first[0], z))),
-        (1, 2): dd.add(turned_yz, dd.negate(dd.scale(first[1], z))),
-    }
-    inertia = np.zeros((3, 3))
-    for (i, j), value in elements.items():
-        inertia[i, j] = inertia[j, i] = dd.total(value)
-    total_mass = dd.total((mass, np.zeros_like(mass)))
-    return MassProperties(total_mass, np.array([dd.total(v) for v in first]), inertia)
+    zeros = np.zeros_like(o_zz)
+    return {(0, 0): turned_xx, (1, 1): turned_yy, (2, 2): (o_zz, zeros), (0, 1): turned_xy,
+            (0, 2): turned_xz, (1, 2): turned_yz}
 
 
 def solid_cylinder(mass, radius, length, axis='axial'):
     """Solid cylinder about its centre of mass, own frame (kg m^2)."""
+    return tensor_from_elements(*solid_cylinder_elements(mass, radius, length, axis))
+
+
+def solid_cylinder_elements(mass, radius, length, axis='axial'):
+    """Solid cylinder's tensor elements (ixx, iyy, izz, ixy, ixz, iyz), own frame."""
     along = 0.5 * mass * radius**2
     across = mass * (3.0 * radius**2 + length**2) / 12.0
     return _axisymmetric(along, across, axis)
@@ -139,6 +154,11 @@ def solid_cylinder(mass, radius, length, axis='axial'):
 
 def tube(mass, inner_radius, outer_radius, length, axis='axial'):
     """Inertia of a thick-walled hollow cylinder about its centre of mass, own frame."""
+    return tensor_from_elements(*tube_elements(mass, inner_radius, outer_radius, length, axis))
+
+
+def tube_elements(mass, inner_radius, outer_radius, length, axis='axial'):
+    """Thick-walled tube's tensor elements (ixx, iyy, izz, ixy, ixz, iyz), own frame."""
     r2 = inner_radius**2 + outer_radius**2
     along = 0.5 * mass * r2
     across = mass * (3.0 * r2 + length**2) / 12.0
@@ -147,18 +167,28 @@ def tube(mass, inner_radius, outer_radius, length, axis='axial'):
 
 def box(mass, size):
     """Solid box with edges (radial, tangential, axial) = ``size`` (m)."""
+    return tensor_from_elements(*box_elements(mass, size))
+
+
+def box_elements(mass, size):
+    """Solid box's tensor elements (ixx, iyy, izz, ixy, ixz, iyz), own frame."""
     a, b, c = size
-    return tensor_from_elements(mass * (b**2 + c**2) / 12.0, mass * (a**2 + c**2) / 12.0,
-                                mass * (a**2 + b**2) / 12.0, 0.0, 0.0, 0.0)
+    return (mass * (b**2 + c**2) / 12.0, mass * (a**2 + c**2) / 12.0,
+            mass * (a**2 + b**2) / 12.0, 0.0, 0.0, 0.0)
 
 
 def sphere(mass, radius):
     """Solid sphere about its centre."""
+    return tensor_from_elements(*sphere_elements(mass, radius))
+
+
+def sphere_elements(mass, radius):
+    """Solid sphere's tensor elements (ixx, iyy, izz, ixy, ixz, iyz)."""
     i = 0.4 * mass * radius**2
-    return tensor_from_elements(i, i, i, 0.0, 0.0, 0.0)
+    return (i, i, i, 0.0, 0.0, 0.0)
 
 
 def _axisymmetric(along, across, axis):
     diagonal = [across, across, across]
     diagonal[SHAPE_AXES.index(axis)] = along
-    return np.diag(diagonal)
+    return (*diagonal, 0.0, 0.0, 0.0)

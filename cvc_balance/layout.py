@@ -10,6 +10,7 @@ No file I/O: :mod:`cvc_balance.layout_file` reads files and text.
 """
 
 from dataclasses import asdict, dataclass
+from functools import cached_property
 import hashlib
 import json
 import math
@@ -47,6 +48,15 @@ class Shape:
     outer_radius: float = 0.0
     size: tuple = ()
     axis: str = 'axial'
+
+    @property
+    def extent(self):
+        """Largest dimension of the shape, m (0 for a point)."""
+        if self.type == 'box':
+            return max(self.size)
+        if self.type in ('cylinder', 'tube'):
+            return max(2.0 * max(self.radius, self.outer_radius), self.length)
+        return 2.0 * self.radius
 
 
 @dataclass(frozen=True)
@@ -105,6 +115,12 @@ class Layout:
     gravity: tuple = DEFAULT_GRAVITY
     balancing: Balancing = Balancing()
     description: str = ''
+
+    @cached_property
+    def placement(self):
+        """Components' mass (kg), R (m), theta (rad), z (m): four (n,) arrays, made once."""
+        return tuple(np.array([getattr(c, key) for c in self.components], dtype=float)
+                     for key in ('mass', 'radius', 'angle', 'z'))
 
     def digest(self):
         """Short SHA-256 of the layout's canonical JSON: same layout, same digest."""

@@ -50,6 +50,8 @@ def aggregated_compute(model, q, omega, alpha, gravity):
 class _Float32Model:
     """The engine's aggregates as float32 numbers."""
 
+    moments = True
+
     def __init__(self, model):
         for name in ('mass', 's_x', 's_y', 's_z', 'p_xz', 'p_yz', 'i_zz'):
             setattr(self, name, np.float32(getattr(model, name)))

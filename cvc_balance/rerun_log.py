@@ -34,6 +34,9 @@ NEWTONS_PER_METRE = 20000.0
 UNBALANCE_NEWTONS_PER_METRE = 200.0
 """Unbalance force arrow: 200 N per metre (a balanced gantry's is tens of newtons)."""
 PLANES = ('plane_I', 'plane_II')
+STATOR_RING_RADIUS = 0.85      # m, drawn for orientation
+VIEW_PIXELS = 500
+"""Pixels across the rotor in a typical 3D view: a shape under two of them is a point."""
 
 
 def blueprint(support_names):
@@ -81,16 +84,17 @@ class RunLogger:
         rec = self.rec
         rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
         rec.log('world/stator/ring',
-                rr.LineStrips3D([_circle(0.85, 0.0)], colors=[(150, 150, 150)]))
+                rr.LineStrips3D([_circle(STATOR_RING_RADIUS, 0.0)], colors=[(150, 150, 150)]))
         rec.log('world/stator/supports', rr.Points3D(
             [[0.0, 0.0, s.z] for s in layout.supports], radii=0.03,
             labels=[s.name for s in layout.supports], colors=[(60, 60, 60)]))
         shares = [c.mass * c.radius for c in layout.components]
         top = max(shares) or 1.0
         rec.log('world/rotor/components', rr.Clear(recursive=True))
+        smallest = view_resolution(layout)
         for component, share in zip(layout.components, shares):
             rec.log(f'world/rotor/components/{component.name}',
-                    _shape(component, _colour(share / top)))
+                    _shape(component, _colour(share / top), smallest))
         speed = self.service_speed or layout.balancing.service_speed or 1.0
         assessment = assess_balance(model, speed)
         self._planes = assessment.planes
@@ -191,14 +195,27 @@ def _colour(share):
     return (int(60 + 195 * share), 80, int(255 - 195 * share))
 
 
-def _shape(component, colour):
+def view_resolution(layout):
+    """
+    Smallest shape (m) the 3D view resolves: two pixels of the whole rotor's width.
+
+    Drawing a shape below it as a solid costs the viewer a mesh and shows nothing
+    more than a point does.
+    """
+    reach = max([STATOR_RING_RADIUS] + [
+        c.radius + (c.shape.extent / 2 if c.shape is not None else 0.0)
+        for c in layout.components])
+    return 2.0 * (2.0 * reach) / VIEW_PIXELS
+
+
+def _shape(component, colour, smallest=0.0):
     """Return a component's shape in the rotor frame at (R, theta, z), for rerun."""
     c, s = math.cos(component.angle), math.sin(component.angle)
     centre = [component.radius * c, component.radius * s, component.z]
     turn = rr.RotationAxisAngle(axis=[0, 0, 1], radians=component.angle)
     shape = component.shape
     label = [component.name]
-    if shape is None or shape.type == 'point':
+    if shape is None or shape.type == 'point' or shape.extent < smallest:
         return rr.Points3D([centre], radii=0.02, colors=[colour], labels=label)
     if shape.type == 'box':
         return rr.Boxes3D(centers=[centre], half_sizes=[[v / 2 for v in shape.size]],

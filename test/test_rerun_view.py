@@ -126,3 +126,34 @@ def test_live_node_logs_the_same_view(tmp_path):
         times, values = scalars[path]
         reference = np.array([pick(int(ns)) for ns in times])
         assert np.abs(values - reference).max() <= 1e-9 * np.abs(reference).max(), path
+
+
+def test_shapes_below_the_view_resolution_are_drawn_as_points(tmp_path):
+    """A 3 mm screw on a gantry is a point; a 30 cm box stays a box."""
+    from cvc_balance.engine import RotorModel
+    from cvc_balance.layout import parse_layout
+    from cvc_balance.rerun_log import open_recording, RunLogger, view_resolution
+    layout = parse_layout({
+        'name': 'screws', 'supports': [{'name': 'a', 'z': -0.3},
+                                       {'name': 'b', 'z': 0.3, 'axial': True}],
+        'components': [
+            {'name': 'screw', 'mass': 0.01, 'radius': 0.6, 'angle': 0.1,
+             'shape': {'type': 'box', 'size': [0.002, 0.002, 0.003]}},
+            {'name': 'pin', 'mass': 0.02, 'radius': 0.6, 'angle': 0.2,
+             'shape': {'type': 'cylinder', 'radius': 0.002, 'length': 0.005}},
+            {'name': 'tank', 'mass': 60.0, 'radius': 0.5, 'angle': 1.0,
+             'shape': {'type': 'box', 'size': [0.3, 0.2, 0.25]}}]})
+    assert 0.003 < view_resolution(layout) < 0.3
+    path = tmp_path / 'screws.rrd'
+    logger = RunLogger(open_recording('save', str(path)))
+    logger.layout(0, RotorModel.from_layout(layout))
+    logger.finish()
+    columns = {}
+    for chunk in RrdReader(str(path)).stream():
+        columns.setdefault(str(chunk.entity_path), set()).update(
+            chunk.to_record_batch().schema.names)
+    for name in ('screw', 'pin'):
+        drawn = columns[f'/world/rotor/components/{name}']
+        assert any(n.startswith('Points3D:positions') for n in drawn), drawn
+        assert not any(n.startswith(('Boxes3D', 'Cylinders3D')) for n in drawn)
+    assert any(n.startswith('Boxes3D:half_sizes') for n in columns['/world/rotor/components/tank'])

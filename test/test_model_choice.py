@@ -1,0 +1,146 @@
+"""
+No more model than a scene needs: which model is taken, that it stays within the stated
+tolerance against the 40-digit reference, and that it costs no more than the full one.
+"""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from cvc_balance.engine import loads, RotorModel
+from cvc_balance.exact import exact_loads
+from cvc_balance.layout import parse_layout
+from cvc_balance.model_choice import choose_model, Envelope, Tolerance
+from reference import random_layout
+
+SUPPORTS = [{'name': 'front', 'z': -0.4}, {'name': 'rear', 'z': 0.4, 'axial': True}]
+
+
+def gantry(z_offsets=False, tilt=0.0, product=0.0):
+    """Ten components: points, boxes and cylinders; optionally axial offsets and tilt."""
+    rng = np.random.default_rng(21)
+    components = []
+    for i in range(10):
+        item = {'name': f'c{i}', 'mass': float(rng.uniform(5, 60)),
+                'radius': float(rng.uniform(0.2, 0.7)),
+                'angle': float(rng.uniform(0, 2 * math.pi)),
+                'z': float(rng.uniform(-0.3, 0.3)) if z_offsets else 0.0}
+        if i % 3 == 1:
+            item['shape'] = {'type': 'box', 'size': [0.3, 0.2, 0.25]}
+        elif i % 3 == 2:
+            item['shape'] = {'type': 'cylinder', 'radius': 0.1, 'length': 0.4,
+                             'axis': 'tangential'}
+        components.append(item)
+    if product:
+        components[0]['inertia'] = {'ixx': 2.0, 'iyy': 2.0, 'izz': 1.0, 'ixy': 0.0,
+                                    'ixz': product, 'iyz': 0.0}
+    g = 9.80665
+    return parse_layout({'name': 'gantry', 'components': components, 'supports': SUPPORTS,
+                         'gravity': [0.0, -g * math.cos(tilt), g * math.sin(tilt)]})
+
+
+ENVELOPE = Envelope(omega_max=25.0, alpha_max=4.0)
+
+
+@pytest.mark.parametrize('layout, tolerance, expected', [
+    # Planar, untilted: no moment at all; the shapes' I_zz matters for the torque only.
+    (gantry(), Tolerance(1.0, 1.0, 1.0), 'rigid bodies, planar'),
+    (gantry(), Tolerance(1.0, 1.0), 'point masses, planar'),
+    # Axial offsets make a moment; the shapes' products are zero: point masses if the
+    # torque is not asked (forces never depend on own inertia: thesis Ch. 5).
+    (gantry(z_offsets=True), Tolerance(1.0, 1.0), 'point masses'),
+    (gantry(z_offsets=True), Tolerance(1.0, 1.0, 1.0), 'rigid bodies'),
+    # A tilt alone makes a moment of gravity (S_xy g_z).
+    (gantry(tilt=math.radians(15)), Tolerance(1.0, 1.0), 'point masses'),
+    # A given tensor with an xz product: the moment needs own inertia.
+    (gantry(product=0.05), Tolerance(1.0, 1.0), 'rigid bodies'),
+    # A loose tolerance: the smallest model, wherever the scene.
+    (gantry(z_offsets=True, tilt=0.3, product=0.05), Tolerance(1e5, 1e5, 1e5),
+     'point masses, planar'),
+])
+def test_the_smallest_model_within_the_tolerance_is_taken(layout, tolerance, expected):
+    choice = choose_model(layout, tolerance, ENVELOPE)
+    assert choice.name == expected
+    assert choice.name in choice.describe()
+
+
+def envelope_samples(rng, envelope, n=64):
+    """Motion samples over the envelope, its corners included."""
+    q = rng.uniform(0, 2 * math.pi, n)
+    omega = rng.uniform(-envelope.omega_max, envelope.omega_max, n)
+    alpha = rng.uniform(-envelope.alpha_max, envelope.alpha_max, n)
+    omega[:4] = [envelope.omega_max, -envelope.omega_max, envelope.omega_max, 0.0]
+    alpha[:4] = [envelope.alpha_max, -envelope.alpha_max, -envelope.alpha_max, 0.0]
+    return q, omega, alpha
+
+
+@pytest.mark.parametrize('seed', range(12))
+def test_chosen_model_stays_within_the_tolerance(seed):
+    """Random layouts and tolerances: the chosen model against the 40-digit reference."""
+    rng = np.random.default_rng(100 + seed)
+    layout = parse_layout(random_layout(rng, n=6, supports=1 + seed % 2,
+                                        tilt=bool(seed % 3), every_kind=seed % 4 == 0))
+    envelope = Envelope(float(rng.uniform(1, 30)), float(rng.uniform(0, 5)))
+    tolerance = Tolerance(*(10.0 ** rng.uniform(-1, 3, 3)))
+    choice = choose_model(layout, tolerance, envelope)
+    q, omega, alpha = envelope_samples(rng, envelope)
+    force, moment, torque = exact_loads(layout, q, omega, alpha, layout.gravity)
+    got = loads(choice.model, q, omega, alpha)
+    full = loads(RotorModel.from_layout(layout), q, omega, alpha)
+    deviation = choice.deviation
+    rounding = 1e-9 * (1.0 + np.abs(force).max() + np.abs(moment).max())
+    assert np.abs(got.force_rotor - force).max() <= rounding
+    assert np.linalg.norm(got.moment_rotor - moment, axis=1).max() <= \
+        deviation.moment + rounding
+    assert np.abs(got.drive_torque - torque).max() <= deviation.torque + rounding
+    for name in got.support_force:
+        change = np.linalg.norm(got.support_force[name] - full.support_force[name], axis=1)
+        assert change.max() <= deviation.force + rounding
+        change = np.linalg.norm(got.support_moment[name] - full.support_moment[name], axis=1)
+        assert change.max() <= deviation.moment + rounding
+    if choice.name != 'rigid bodies':
+        assert (deviation.force <= tolerance.force and deviation.moment <= tolerance.moment
+                and deviation.torque <= tolerance.torque)
+
+
+def best_time(call, repeat=7):
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        call()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def test_a_reduced_model_costs_no_more_than_the_full_one():
+    """
+    Per sample (moment terms skipped) and once (own tensors not turned and summed).
+
+    Best of several timings; 5 % is left for timing noise on a shared machine.
+    """
+    layout = gantry()
+    choice = choose_model(layout, Tolerance(1.0, 1.0), ENVELOPE)
+    assert choice.name == 'point masses, planar'
+    full = RotorModel.from_layout(layout)
+    rng = np.random.default_rng(3)
+    q, omega, alpha = (rng.uniform(0, 6, 1 << 18), rng.uniform(0, 25, 1 << 18),
+                       rng.uniform(-4, 4, 1 << 18))
+    per_sample_reduced = best_time(lambda: loads(choice.model, q, omega, alpha), 9)
+    per_sample_full = best_time(lambda: loads(full, q, omega, alpha), 9)
+    assert per_sample_reduced <= 1.05 * per_sample_full
+    big = parse_layout(random_layout(np.random.default_rng(4), n=20000, supports=2,
+                                     tilt=False))
+    chosen_once = best_time(lambda: choose_model(big, Tolerance(1e9, 1e9), ENVELOPE), 5)
+    full_once = best_time(lambda: RotorModel.from_layout(big), 5)
+    assert chosen_once <= 1.05 * full_once
+
+
+def test_the_full_model_is_taken_when_nothing_can_be_dropped():
+    layout = gantry(z_offsets=True, product=0.05)
+    choice = choose_model(layout, Tolerance(1e-6, 1e-6, 1e-6), ENVELOPE)
+    assert choice.name == 'rigid bodies'
+    full = RotorModel.from_layout(layout)
+    for field in ('mass', 's_x', 's_y', 's_z', 'p_xz', 'p_yz', 'i_zz'):
+        assert getattr(choice.model, field) == getattr(full, field)
