@@ -17,6 +17,7 @@ from cvc_balance.engine import RotorModel, sample_loads
 from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME, degrees, radians
 from cvc_balance.layout import LayoutError
 from cvc_balance.layout_file import load_layout
+from cvc_balance.model_choice import choose_model, Envelope, Tolerance
 from cvc_balance.unbalance import couple_unbalance, static_unbalance
 
 EXIT_BAD_INPUT = 2
@@ -50,6 +51,11 @@ def _parser():
                        help='rotor angle q from stator X to rotor X, degrees (default 0)')
     solve.add_argument('--gravity', type=_finite, nargs=3, metavar=('GX', 'GY', 'GZ'),
                        help="gravity in the stator frame, m/s^2 (default: the layout's)")
+    solve.add_argument('--tolerance', type=_tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
+                       help='largest change accepted in the forces (N), moments (N m) and '
+                       'drive torque (N m), inf for an output not asked: take the smallest '
+                       'model within it for speeds up to |W| and accelerations up to |A|, '
+                       'and say which')
     solve.add_argument('--json', action='store_true', help='print one JSON object')
     solve.set_defaults(run=_solve)
 
@@ -133,19 +139,37 @@ def _finite(text):
     return value
 
 
+def _tolerance(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not value >= 0.0:
+        raise argparse.ArgumentTypeError(f'must be >= 0 (or inf), got {text!r}')
+    return value
+
+
 def _solve(args):
     layout = load_layout(args.layout)
-    model = RotorModel.from_layout(layout)
+    gravity = tuple(args.gravity) if args.gravity else layout.gravity
+    if args.tolerance:
+        choice = choose_model(layout, Tolerance(*args.tolerance),
+                              Envelope(abs(args.omega), abs(args.alpha)), gravity)
+        model, model_name, model_line = choice.model, choice.name, choice.describe()
+    else:
+        model = RotorModel.from_layout(layout)
+        model_name, model_line = 'rigid bodies', 'model: rigid bodies (full)'
     q = radians(args.angle_deg)
-    gravity = tuple(args.gravity) if args.gravity else model.gravity
     result = sample_loads(model, q, args.omega, args.alpha, gravity)
     speed = layout.balancing.service_speed or abs(args.omega)
     assessment = assess_balance(model, speed) if speed > 0.0 else None
     summary = solve_summary(model, result, assessment, args.omega, args.alpha, q, gravity)
+    summary['model'] = model_name
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
         print(format_table(summary))
+        print(model_line)
     return 0
 
 

@@ -86,9 +86,11 @@ class ModelChoice:
                 f'{t.moment:g} N m, {t.torque:g} N m)')
 
 
-def choose_model(layout, tolerance, envelope):
+def choose_model(layout, tolerance, envelope, gravity=None):
     """
     Return the cheapest :class:`ModelChoice` whose deviation is within ``tolerance``.
+
+    ``gravity``: stator-frame m/s^2 the scene runs under (default the layout's).
 
     The bounds come from one float64 pass over the components (a few numpy calls,
     with a margin for its rounding); only the chosen model is then aggregated.
@@ -102,7 +104,7 @@ def choose_model(layout, tolerance, envelope):
     dynamic = envelope.alpha_max + envelope.omega_max ** 2
     own_products = float(np.hypot(own[:, 4], own[:, 5]).sum())     # |(ixz, iyz)|
     own_zz = float(own[:, 2].sum())
-    g_x, g_y, g_z = layout.gravity
+    g_x, g_y, g_z = layout.gravity if gravity is None else gravity
     g_xy = math.hypot(g_x, g_y)
     # |M| of the full model, and the float64 pass's rounding at most (n + 2) eps of
     # the sums of magnitudes.

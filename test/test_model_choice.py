@@ -144,3 +144,27 @@ def test_the_full_model_is_taken_when_nothing_can_be_dropped():
     full = RotorModel.from_layout(layout)
     for field in ('mass', 's_x', 's_y', 's_z', 'p_xz', 'p_yz', 'i_zz'):
         assert getattr(choice.model, field) == getattr(full, field)
+
+
+def test_solve_says_which_model_it_took(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    layout_file = root / 'config' / 'ct_gantry.yaml'
+
+    def solve(*tolerance):
+        run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'solve',
+                              str(layout_file), '--omega', '23.27', '--json',
+                              '--tolerance', *tolerance], capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr
+        return json.loads(run.stdout)
+    from cvc_balance.layout_file import load_layout
+    layout = load_layout(layout_file)
+    for tolerance in (('1e9', 'inf', 'inf'), ('1', '1', '1')):
+        summary = solve(*tolerance)
+        choice = choose_model(layout, Tolerance(*map(float, tolerance)), Envelope(23.27))
+        assert summary['model'] == choice.name
+    assert solve('1e9', 'inf', 'inf')['model'] == 'point masses, planar'
+    assert all(v == 0.0 for v in solve('1e9', 'inf', 'inf')['moment_rotor'])
