@@ -9,19 +9,28 @@ each chunk (or, without them, by walking the chunk's records), and fields of
 fixed-layout messages are gathered for all messages of a chunk at once.
 """
 
+from collections import deque
 from dataclasses import dataclass, field
 import struct
-import zlib
+import threading
 
 import numpy as np
 
 from cvc_balance.cdr import ENCAPSULATION_LE, find_joint_state_fields, read_string_message
 
+try:    # ISA-L's CRC-32 (zlib's polynomial) runs ~15 times faster than zlib's here
+    from isal.isal_zlib import crc32
+except ImportError:                                  # pragma: no cover
+    from zlib import crc32
+
 MAGIC = b'\x89MCAP0\r\n'
 OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
 MESSAGE_HEADER = 31
+AHEAD = 4
+"""Chunks decompressed ahead of the one being parsed."""
 _U64 = struct.Struct('<Q')
+_local = threading.local()   # a decompressor per thread
 
 
 class BagError(ValueError):
@@ -64,7 +73,7 @@ class Bag:
         self.problems = []
         self.schemas, self.channels, self.chunks = {}, {}, []
         self._loose = []         # (channel, offset in file) of messages outside chunks
-        self._decoded = {}
+        self._unreadable = set()   # chunks already reported
         self._walk()
 
     # -- structure -------------------------------------------------------------------
@@ -147,42 +156,42 @@ class Bag:
 
     # -- message access ----------------------------------------------------------------
 
-    def _chunk_bytes(self, number):
-        if number in self._decoded:
-            return self._decoded[number]
-        chunk = self.chunks[number]
-        try:
-            if chunk.compression == '':
-                records = bytes(chunk.data)
-            elif chunk.compression == 'zstd':
-                import zstandard
-                records = zstandard.ZstdDecompressor().decompress(
-                    chunk.data, max_output_size=chunk.uncompressed_size)
-            elif chunk.compression == 'lz4':
-                import lz4.frame
-                records = lz4.frame.decompress(chunk.data)
-            else:
-                raise ValueError(f'unknown compression {chunk.compression!r}')
-            if len(records) != chunk.uncompressed_size:
-                raise ValueError('size differs from the chunk header')
-            if chunk.crc and zlib.crc32(records) != chunk.crc:
-                raise ValueError('CRC mismatch')
-        except Exception as error:  # any codec's error: the chunk is lost, the rest is used
-            self.problems.append(f'chunk at byte {chunk.offset} unreadable ({error}); skipped')
-            records = None
-        self._decoded = {number: records}   # keep one: chunks are read in order
-        return records
+    def _decoded_chunks(self, numbers):
+        """
+        Yield (number, records or None) of chunks ``numbers``, in order.
+
+        The next few chunks are decompressed (and checked) on the worker threads
+        while the caller parses the current one.
+        """
+        from cvc_balance.workers import pool
+        numbers, ahead = iter(numbers), deque()
+        while True:
+            while len(ahead) < AHEAD:
+                number = next(numbers, None)
+                if number is None:
+                    break
+                ahead.append((number, pool().submit(_decode, self.chunks[number])))
+            if not ahead:
+                return
+            number, job = ahead.popleft()
+            records, error = job.result()
+            if error is not None and number not in self._unreadable:
+                self._unreadable.add(number)
+                self.problems.append(f'chunk at byte {self.chunks[number].offset} unreadable '
+                                     f'({error}); skipped')
+            yield number, records
 
     def message_offsets(self, channel):
         """Yield (records as uint8 array, offsets of this channel's message records)."""
-        for number, chunk in enumerate(self.chunks):
-            records = self._chunk_bytes(number)
+        # Indexed chunks without messages of this channel are not even decompressed.
+        wanted = [number for number, chunk in enumerate(self.chunks)
+                  if channel.id in chunk.indexes or not chunk.indexes]
+        for number, records in self._decoded_chunks(wanted):
+            chunk = self.chunks[number]
             if records is None:
                 continue
             buffer = np.frombuffer(records, dtype=np.uint8)
             offsets = chunk.indexes.get(channel.id)
-            if offsets is None and chunk.indexes:
-                continue            # indexed chunk without messages of this channel
             if offsets is None:
                 offsets = _walk_chunk(records, channel.id)
             if len(offsets) and int(offsets.max()) + MESSAGE_HEADER > len(records):
@@ -209,6 +218,31 @@ class Bag:
         return out
 
 
+def _decode(chunk):
+    """Return (records, None) of a chunk, decompressed and checked, or (None, error)."""
+    try:
+        if chunk.compression == '':
+            records = chunk.data
+        elif chunk.compression == 'zstd':
+            import zstandard
+            if not hasattr(_local, 'zstd'):
+                _local.zstd = zstandard.ZstdDecompressor()
+            records = _local.zstd.decompress(chunk.data,
+                                             max_output_size=chunk.uncompressed_size)
+        elif chunk.compression == 'lz4':
+            import lz4.frame
+            records = lz4.frame.decompress(chunk.data)
+        else:
+            raise ValueError(f'unknown compression {chunk.compression!r}')
+        if len(records) != chunk.uncompressed_size:
+            raise ValueError('size differs from the chunk header')
+        if chunk.crc and crc32(records) != chunk.crc:
+            raise ValueError('CRC mismatch')
+    except Exception as error:  # any codec's error: the chunk is lost, the rest is used
+        return None, error
+    return records, None
+
+
 def _string(data, position):
     length, = struct.unpack_from('<I', data, position)
     return bytes(data[position + 4:position + 4 + length]).decode('utf-8'), position + 4 + length
@@ -226,6 +260,45 @@ def _walk_chunk(records, channel_id):
     return np.array(offsets, dtype=np.int64)
 
 
+def _stride(at):
+    """Return the common step of evenly spaced positions ``at`` (increasing), else None."""
+    if len(at) > 1:
+        stride = int(at[1] - at[0])
+        if stride > 0 and at[-1] - at[0] == stride * (len(at) - 1) and \
+                np.all(np.diff(at) == stride):
+            return stride
+    return None
+
+
+def alike(buffer, at, spans):
+    """
+    Whether bytes ``spans`` ((start, stop) pairs) after each position ``at`` match the first's.
+
+    Compared up to eight bytes at a time through strided views when the positions
+    are evenly spaced (records of one fixed layout written one after the other),
+    else gathered.
+    """
+    stride = _stride(at)
+    for lo, hi in spans:
+        if hi <= lo:
+            continue
+        if stride is None:
+            block = buffer[at[:, None] + np.arange(lo, hi)]
+            if not np.all(block == block[0]):
+                return False
+            continue
+        width = next(w for w in (8, 4, 2, 1) if w <= hi - lo)
+        starts = list(range(lo, hi - width + 1, width))
+        if starts[-1] + width < hi:
+            starts.append(hi - width)       # the last word overlaps the one before
+        for start in starts:
+            column = np.ndarray(shape=(len(at),), dtype=f'<u{width}', buffer=buffer,
+                                offset=int(at[0]) + start, strides=(stride,))
+            if not np.all(column == column[0]):
+                return False
+    return True
+
+
 def gather(buffer, offsets, data_offset, dtype):
     """
     One field of every message: ``dtype`` at ``data_offset`` in each message's data.
@@ -235,12 +308,10 @@ def gather(buffer, offsets, data_offset, dtype):
     """
     dtype = np.dtype(dtype)
     at = offsets + (MESSAGE_HEADER + data_offset)
-    if len(at) > 1:
-        stride = int(at[1] - at[0])
-        if stride > 0 and at[-1] - at[0] == stride * (len(at) - 1) and \
-                np.all(np.diff(at) == stride):
-            return np.ndarray(shape=(len(at),), dtype=dtype, buffer=buffer,
-                              offset=int(at[0]), strides=(stride,)).copy()
+    stride = _stride(at)
+    if stride is not None:
+        return np.ndarray(shape=(len(at),), dtype=dtype, buffer=buffer,
+                          offset=int(at[0]), strides=(stride,)).copy()
     columns = np.arange(dtype.itemsize)
     return buffer[at[:, None] + columns].copy().view(dtype).ravel()
 
@@ -282,9 +353,8 @@ def joint_samples(bag, channel, joint):
         uniform = found is not None and bool(np.all(lengths == lengths[0]))
         if uniform:
             fields, names_end = found
-            columns = np.r_[0:4, 12:names_end]    # all but the stamp: frame id and names
-            head = buffer[(offsets + MESSAGE_HEADER)[:, None] + columns]
-            uniform = bool(np.all(head == head[0]))
+            # All but the stamp alike: encapsulation, frame id and joint names.
+            uniform = alike(buffer, offsets + MESSAGE_HEADER, ((0, 4), (12, names_end)))
         if uniform:
             parts.append((
                 gather(buffer, offsets, fields['sec'], '<i4').astype(np.int64) * 1_000_000_000

@@ -3,19 +3,22 @@ rosbag2-style MCAP files: profile ros2, ros2msg schemas, CDR messages, chunked.
 
 Two ways in: :meth:`BagWriter.write` takes one serialized message (live
 recording), :meth:`BagWriter.write_block` takes n samples of fixed-layout
-messages built as one numpy array (offline replay, simulation). Chunks are
-compressed on the worker threads and written in order by one I/O thread,
-each with its message indexes and flushed at once, so a process killed at
-any moment loses at most the chunks not yet written (the one being filled
-and those in flight). The framing
-records come from the ``mcap`` package; only message records and message
-indexes are packed here, with numpy.
+messages built in a numpy buffer (offline replay, simulation). Chunks are
+compressed (and their CRC taken) on the writer's worker threads, straight
+from the buffer they were built in, and written in order by one I/O thread
+with one system call per chunk (chunk record and its message indexes), so a
+process killed at any moment loses at most the chunks not yet written (the
+one being filled and those in flight). Buffers are reused: on this kind of
+machine touching fresh memory costs more than compressing it. The framing
+records come from the ``mcap`` package; only chunks, message records and
+message indexes are packed here.
 """
 
 from collections import defaultdict, deque
 from concurrent.futures import ThreadPoolExecutor
+import os
 import struct
-import zlib
+import threading
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -24,13 +27,19 @@ from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Schema, 
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
+from cvc_balance.mcap_reader import crc32
 from cvc_balance.msg_schema import schema_text
-from cvc_balance.workers import pool
 
 PROFILE = 'ros2'
 LIBRARY = 'cvc_balance'
 MESSAGE_HEADER = 31   # opcode 1, length 8, channel 2, sequence 4, log time 8, publish time 8
+INDEX_HEADER = 15     # opcode 1, length 8, channel 2, byte length of the entries 4
+ZSTD_LEVEL = -3
+"""zstd level of the chunks: libmcap's 'Fast' (its default 1 costs half again the time)."""
+BUFFERS = 8
+"""Buffers a :class:`MessageBlock` rotates through: one filled while the others are packed."""
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
+_INDEX_HEADER = np.dtype([('op', 'u1'), ('len', '<u8'), ('ch', '<u2'), ('n', '<u4')])
 _QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {durability}\n'
         '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
         '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n'
@@ -38,16 +47,23 @@ _QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {
         '  avoid_ros_namespace_conventions: false\n')
 
 
-def _compressor(name):
+def _compressor(name, level=None):
     if name == 'zstd':
         import zstandard
-        # One compressor per call: they must not be shared between threads.
-        return lambda data: zstandard.ZstdCompressor(level=1).compress(data)
+        local = threading.local()   # a compressor must not be shared between threads
+
+        def compress(data):
+            if not hasattr(local, 'compressor'):
+                local.compressor = zstandard.ZstdCompressor(
+                    level=ZSTD_LEVEL if level is None else level)
+            return local.compressor.compress(data)
+        return compress
     if name == 'lz4':
         import lz4.frame
-        return lambda data: lz4.frame.compress(data, store_size=True)
+        return lambda data: lz4.frame.compress(data, compression_level=level or 0,
+                                               store_size=True)
     if name == '':
-        return bytes
+        return None
     raise ValueError(f'unknown compression {name!r} (zstd, lz4 or none)')
 
 
@@ -57,12 +73,17 @@ class MessageBlock:
 
     ``parts`` is a list of (channel id, CdrLayout); sample i's G records lie
     one after the other. Set ``array['log_time']`` and each part's fields
-    ``array[f'{g}.{field}']`` (g = part index), then hand the block to
+    ``fields[f'{g}.{field}']`` (g = part index), then hand the block to
     :meth:`BagWriter.write_block`.
+
+    The block rotates through up to ``buffers`` buffers, made when first
+    needed: after ``write_block`` the fields are those of another buffer,
+    which holds what was last written to it (the constant bytes of the
+    template never change), so set every variable field before each write.
     """
 
-    def __init__(self, parts, n):
-        """Allocate the block for ``n`` samples, constant bytes filled in."""
+    def __init__(self, parts, n, buffers=BUFFERS):
+        """Lay out the block for ``n`` samples; its buffers are made when first needed."""
         template, names, formats, offsets = bytearray(), [], [], []
         self.channels, self.record_offsets = [], []
         for g, (channel, layout) in enumerate(parts):
@@ -84,12 +105,29 @@ class MessageBlock:
                 offsets.append(data_start + offset)
         self.group_size = len(template)
         self.n = n
-        self.bytes = np.tile(np.frombuffer(bytes(template), np.uint8), n)
-        self.array = self.bytes.view(np.dtype({'names': names, 'formats': formats,
-                                               'offsets': offsets,
-                                               'itemsize': self.group_size}))
-        self.fields = {name: self.array[name] for name in names}   # views, made once
+        self._template = np.frombuffer(bytes(template), np.uint8)
+        self._names = names
+        self._dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                                'itemsize': self.group_size})
+        self._max_buffers = max(1, buffers)
+        self._made, self._free, self._busy = 0, deque(), deque()
+        self._current = None
         self._offsets = {}
+
+    @property
+    def bytes(self):
+        """Return the current buffer, uint8 (n * group_size,)."""
+        return self._buffer()[0]
+
+    @property
+    def array(self):
+        """Return the current buffer as a structured array of n samples."""
+        return self._buffer()[1]
+
+    @property
+    def fields(self):
+        """Return {'g.field': view of that field of the n samples} of the current buffer."""
+        return self._buffer()[2]
 
     def record_offsets_for(self, count):
         """{channel: offsets of its records} within a chunk of ``count`` samples (cached)."""
@@ -99,23 +137,83 @@ class MessageBlock:
                                     in zip(self.channels, self.record_offsets)}
         return self._offsets[count]
 
+    def put(self, names, values, count, dtype=None):
+        """
+        Set fields ``names`` of the first ``count`` samples to ``values``.
+
+        ``values`` is one row per field, (len(names), count), or one (count,)
+        row for all of them. ``dtype`` (default the first field's) is the type
+        stored at each field's offset, e.g. '<u8' over a stamp's sec and
+        nanosec. Rows go to fields evenly spaced in the block (consecutive
+        fields of one type) in one strided copy, others field by field.
+        """
+        data, _, _, views = self._buffer()
+        key = (tuple(names), dtype)
+        if key not in views:
+            dtype = np.dtype(dtype or self._dtype.fields[names[0]][0])
+            offsets = [self._dtype.fields[name][1] for name in names]
+            step = offsets[1] - offsets[0] if len(offsets) > 1 else dtype.itemsize
+            together = None
+            if all(b - a == step for a, b in zip(offsets, offsets[1:])):
+                together = np.ndarray((len(names), self.n), dtype, data, offsets[0],
+                                      (step, self.group_size))
+            views[key] = (together, [np.ndarray((self.n,), dtype, data, offset,
+                                                (self.group_size,)) for offset in offsets])
+        together, apart = views[key]
+        if np.ndim(values) == 1:
+            for column in apart:
+                column[:count] = values
+        elif together is not None:
+            together[:, :count] = values
+        else:
+            for column, row in zip(apart, values):
+                column[:count] = row
+
     def set_time(self, log_time, count=None):
         """Set log and publish time (ns) of every message of the first ``count`` samples."""
         count = self.n if count is None else count
-        for g in range(len(self.channels)):
-            self.fields[f'{g}.log'][:count] = log_time[:count]
-            self.fields[f'{g}.pub'][:count] = log_time[:count]
+        log_time = np.asarray(log_time[:count])
+        for stamp in ('log', 'pub'):
+            self.put([f'{g}.{stamp}' for g in range(len(self.channels))], log_time, count)
+
+    def hand_over(self, future):
+        """Leave the current buffer to the writer until ``future`` is done; take another."""
+        self._busy.append((future, self._buffer()))
+        self._current = None
+
+    def _buffer(self):
+        if self._current is None:
+            while self._busy and self._busy[0][0].done():
+                self._free.append(self._busy.popleft()[1])
+            if self._free:
+                self._current = self._free.popleft()
+            elif self._made < self._max_buffers:
+                data = np.tile(self._template, self.n)
+                array = data.view(self._dtype)
+                self._current = (data, array, {name: array[name] for name in self._names}, {})
+                self._made += 1
+            else:
+                future, self._current = self._busy.popleft()
+                future.result()
+        return self._current
 
 
 class BagWriter:
     """Write a rosbag2-compatible MCAP file (see the module's description)."""
 
-    def __init__(self, path, compression='zstd', chunk_bytes=1 << 20):
-        """Open ``path`` for writing; ``compression`` 'zstd', 'lz4' or ''."""
+    def __init__(self, path, compression='zstd', chunk_bytes=1 << 20, level=None):
+        """
+        Open ``path`` for writing; ``compression`` 'zstd', 'lz4' or ''.
+
+        ``level`` is the compressor's level (default: zstd :data:`ZSTD_LEVEL`,
+        lz4 0); ``chunk_bytes`` the uncompressed size of a chunk.
+        """
         self.path = str(path)
-        self._stream = open(self.path, 'wb')
+        self._file = open(self.path, 'wb', buffering=0)
+        self._fd = self._file.fileno()
+        self._position = 0
         self._compression = compression
-        self._compress = _compressor(compression)
+        self._compress = _compressor(compression, level)
         self._chunk_bytes = chunk_bytes
         self._schemas, self._channels, self._chunk_indexes = {}, {}, []
         self._counts = defaultdict(int)
@@ -124,9 +222,12 @@ class BagWriter:
         self._pending = bytearray()
         self._pending_index = defaultdict(list)
         self._pending_times = [None, None]
+        self._workers = ThreadPoolExecutor(max_workers=os.cpu_count() or 1,
+                                           thread_name_prefix='bag_pack')
         self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bag_writer')
         self._io_jobs = deque()
-        self._stream.write(MCAP0_MAGIC)
+        self._index_templates = {}
+        self._write_all([MCAP0_MAGIC])
         self._emit(Header(profile=PROFILE, library=LIBRARY))
         self._closed = False
 
@@ -145,6 +246,12 @@ class BagWriter:
         self._emit(channel)
         return channel.id
 
+    def block(self, parts):
+        """Return a :class:`MessageBlock` of ``parts`` holding one chunk's samples."""
+        block = MessageBlock(parts, 1)
+        block.n = max(1, self._chunk_bytes // block.group_size)
+        return block
+
     def write(self, channel, log_time, data):
         """Add one serialized message (CDR bytes) at ``log_time`` ns."""
         self._pending_index[channel].append((log_time, len(self._pending)))
@@ -160,25 +267,28 @@ class BagWriter:
         """
         Add the first ``count`` samples of a :class:`MessageBlock` (default all).
 
-        ``log_time`` (count,) ns, non-decreasing, is set on the block. The bytes
-        are copied: the block can be refilled as soon as this returns, while
-        its chunks are compressed on the worker threads and written in order by
-        the writer's I/O thread.
+        ``log_time`` (count,) ns, non-decreasing, is set on the block. The
+        buffer is not copied: it goes to the worker threads, which compress
+        its chunks and write them in order, and the block takes another buffer
+        for the next fill (:meth:`MessageBlock.hand_over`).
         """
         self._flush_pending()
         count = block.n if count is None else count
-        log_time = np.asarray(log_time, dtype=np.uint64)
+        log_time = np.array(log_time[:count], dtype=np.uint64)   # kept until written
         block.set_time(log_time, count)
+        data = block.bytes.data
         per_chunk = max(1, self._chunk_bytes // block.group_size)
+        job = None
         for start in range(0, count, per_chunk):
             stop = min(start + per_chunk, count)
-            records = block.bytes[start * block.group_size:stop * block.group_size].tobytes()
+            records = data[start * block.group_size:stop * block.group_size]
             times = log_time[start:stop]
-            index = {channel: (times, offsets)
-                     for channel, offsets in block.record_offsets_for(stop - start).items()}
+            index = (block, stop - start, times)
             for channel in block.channels:
                 self._counts[channel] += stop - start
-            self._submit(records, index, int(times[0]), int(times[-1]))
+            job = self._submit(records, index, int(times[0]), int(times[-1]))
+        if job is not None:
+            block.hand_over(job)
 
     def close(self):
         """Write the last chunk, the summary and the footer; close the file."""
@@ -187,8 +297,9 @@ class BagWriter:
         self._flush_pending()
         self._wait_for_io()
         self._io.shutdown()
+        self._workers.shutdown()
         self._emit(DataEnd(data_section_crc=0))
-        summary_start = self._stream.tell()
+        summary_start = self._position
         summary, offsets = RecordBuilder(), []
         groups = ((Opcode.SCHEMA, self._schemas.values()),
                   (Opcode.CHANNEL, self._channels.values()),
@@ -203,11 +314,11 @@ class BagWriter:
         summary_offset_start = summary_start + summary.count
         for offset in offsets:
             offset.write(summary)
-        self._stream.write(summary.end())
+        self._write_all([summary.end()])
         self._emit(Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
                           summary_crc=0))
-        self._stream.write(MCAP0_MAGIC)
-        self._stream.close()
+        self._write_all([MCAP0_MAGIC])
+        self._file.close()
         self._closed = True
 
     def __enter__(self):
@@ -220,10 +331,23 @@ class BagWriter:
 
     # -- internals -------------------------------------------------------------------
 
+    def _write_all(self, parts):
+        """Write ``parts`` (bytes-like) at the end of the file in one system call."""
+        views = [memoryview(p).cast('B') for p in parts]
+        total = sum(len(v) for v in views)
+        left = total - os.writev(self._fd, views)
+        while left:                       # a short write (rare for files): the rest
+            done = sum(len(v) for v in views) - left
+            while done >= len(views[0]):
+                done -= len(views.pop(0))
+            views[0] = views[0][done:]
+            left -= os.writev(self._fd, views)
+        self._position += total
+
     def _emit(self, record):
         builder = RecordBuilder()
         record.write(builder)
-        self._stream.write(builder.end())
+        self._write_all([builder.end()])
 
     def _flush_pending(self):
         if not self._pending:
@@ -231,62 +355,81 @@ class BagWriter:
         index = {channel: (np.array([t for t, _ in entries], dtype=np.uint64),
                            np.array([o for _, o in entries], dtype=np.uint64))
                  for channel, entries in self._pending_index.items()}
-        self._submit(bytes(self._pending), index, *self._pending_times)
+        self._submit(self._pending, index, *self._pending_times)
         self._pending = bytearray()
         self._pending_index = defaultdict(list)
         self._pending_times = [None, None]
 
     def _submit(self, records, index, start_time, end_time):
         """Compress a chunk on a worker thread; write it, in order, on the I/O thread."""
-        packed = pool().submit(self._pack, records)
-        self._io_jobs.append(self._io.submit(self._write_chunk, packed, records, index,
-                                             start_time, end_time))
+        packed = self._workers.submit(self._pack, records)
+        job = self._io.submit(self._write_chunk, packed, len(records), index, start_time,
+                              end_time)
+        self._io_jobs.append(job)
         while len(self._io_jobs) > 32:          # bound the memory held by chunks in flight
             self._io_jobs.popleft().result()
+        return job
 
     def _pack(self, records):
-        return self._compress(records), zlib.crc32(records)
+        crc = crc32(records)
+        return (records if self._compress is None else self._compress(records)), crc
 
     def _wait_for_io(self):
         while self._io_jobs:
             self._io_jobs.popleft().result()
 
-    def _write_chunk(self, packed, records, index, start_time, end_time):
+    def _index_records(self, index):
+        """Message Index records of a chunk: (bytes, {channel: offset within them})."""
+        if isinstance(index, dict):             # from write(): per channel times, offsets
+            parts, where, position = [], {}, 0
+            for channel, (times, offsets) in index.items():
+                body = np.empty(len(times), dtype=[('t', '<u8'), ('o', '<u8')])
+                body['t'], body['o'] = times, offsets
+                header = np.array([(Opcode.MESSAGE_INDEX, 6 + body.nbytes, channel,
+                                    body.nbytes)], dtype=_INDEX_HEADER)
+                where[channel] = position
+                parts += [header.tobytes(), body.tobytes()]
+                position += INDEX_HEADER + body.nbytes
+            return b''.join(parts), where
+        block, count, times = index             # from write_block: one time per sample
+        key = (id(block), count)
+        if key not in self._index_templates:
+            size = INDEX_HEADER + 16 * count
+            template = np.zeros(size * len(block.channels), np.uint8)
+            where = {}
+            for i, (channel, offsets) in enumerate(block.record_offsets_for(count).items()):
+                template[i * size:i * size + INDEX_HEADER].view(_INDEX_HEADER)[0] = (
+                    Opcode.MESSAGE_INDEX, 6 + 16 * count, channel, 16 * count)
+                template[i * size + INDEX_HEADER:(i + 1) * size].view('<u8')[1::2] = offsets
+                where[channel] = i * size
+            self._index_templates[key] = (block, template, where)   # block: keeps id unique
+        _, template, where = self._index_templates[key]
+        records = template.copy()
+        np.ndarray((len(where), count), '<u8', records, INDEX_HEADER,
+                   (INDEX_HEADER + 16 * count, 16))[...] = times
+        return records, where
+
+    def _write_chunk(self, packed, size, index, start_time, end_time):
         data, crc = packed.result()
-        # The Chunk record, framed here so that its megabyte of data is written once,
-        # not copied through mcap's RecordBuilder.
         compression = self._compression.encode()
         header = struct.pack(f'<BQQQQII{len(compression)}sQ', Opcode.CHUNK,
                              8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(data), start_time,
-                             end_time, len(records), crc, len(compression), compression,
-                             len(data))
-        chunk_start = self._stream.tell()
-        self._stream.write(header)
-        self._stream.write(data)
+                             end_time, size, crc, len(compression), compression, len(data))
+        index_records, where = self._index_records(index)
+        chunk_start = self._position
         chunk_length = len(header) + len(data)
-        index_start = self._stream.tell()
-        index_offsets, parts = {}, []
-        position = index_start
-        for channel, (times, offsets) in index.items():
-            pairs = np.empty(len(times), dtype=[('t', '<u8'), ('o', '<u8')])
-            pairs['t'], pairs['o'] = times, offsets
-            body = pairs.tobytes()
-            header = np.array([(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body))],
-                              dtype=[('op', 'u1'), ('len', '<u8'), ('ch', '<u2'),
-                                     ('n', '<u4')]).tobytes()
-            index_offsets[channel] = position
-            parts += [header, body]
-            position += len(header) + len(body)
-        self._stream.write(b''.join(parts))
-        self._stream.flush()   # a finished chunk survives a killed process
+        index_start = chunk_start + chunk_length
+        # Chunk and message indexes in one system call: a finished chunk survives a kill.
+        self._write_all([header, data, index_records])
         self._chunk_count += 1
         _extend(self._times, start_time, end_time)
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=start_time, message_end_time=end_time,
             chunk_start_offset=chunk_start, chunk_length=chunk_length,
-            message_index_offsets=index_offsets, message_index_length=position - index_start,
-            compression=self._compression, compressed_size=len(data),
-            uncompressed_size=len(records)))
+            message_index_offsets={channel: index_start + offset
+                                   for channel, offset in where.items()},
+            message_index_length=len(index_records), compression=self._compression,
+            compressed_size=len(data), uncompressed_size=size))
 
     def _statistics(self):
         start, end = self._times

@@ -22,15 +22,14 @@ from cvc_balance.layout import LayoutError
 from cvc_balance.layout_file import layout_from_text
 from cvc_balance.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
                                      MotionSamples, string_samples)
-from cvc_balance.mcap_writer import BagWriter, MessageBlock
+from cvc_balance.mcap_writer import BagWriter
 from cvc_balance.motion import acceleration_series, accepted_samples
 from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
 JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
 STRING, WRENCH = topics.STRING_TYPE, topics.WRENCH_TYPE
-BLOCK = 1 << 16
-SUB = 1 << 14
-"""Samples per message block filled at once: its bytes stay in cache."""
+BLOCK = 1 << 14
+"""Samples computed at once (the engine's work arrays stay in cache)."""
 
 
 @dataclass
@@ -185,7 +184,7 @@ def _output_channels(writer):
 
 
 class OutputBlocks:
-    """The message blocks of one layout's outputs, made once and refilled (SUB samples)."""
+    """The message block of one layout's outputs: one chunk's samples, refilled."""
 
     def __init__(self, writer, channels, model):
         """Register the support channels and lay out the block for ``model``'s supports."""
@@ -198,35 +197,34 @@ class OutputBlocks:
         parts += [(supports[s.name], stator) for s in model.supports]
         parts += [(channels[topics.UNBALANCE], rotor), (channels[topics.DRIVE_TORQUE], rotor)]
         self.writer, self.model = writer, model
-        self.block = MessageBlock(parts, SUB)
+        self.block = writer.block(parts)
         self.static, self.couple = static_unbalance(model), couple_unbalance(model)
 
     def write(self, result, stamp, log_time, omega):
-        """Write the outputs of a computed block of samples, SUB samples at a time."""
-        model = self.model
+        """Write the outputs of a computed block of samples, a chunk at a time."""
+        block, model = self.block, self.model
         wrenches = [(result.force_stator, result.moment_stator)]
         wrenches += [(result.support_force[s.name], result.support_moment[s.name])
                      for s in model.supports]
-        sec_all, nanosec_all = np.divmod(stamp, 1_000_000_000)
-        fields = self.block.fields
-        for a in range(0, len(stamp), SUB):
-            b = min(a + SUB, len(stamp))
+        unbalance, drive = len(wrenches), len(wrenches) + 1
+        # builtin_interfaces/Time (sec int32, nanosec uint32) of all parts as one '<u8'.
+        sec, nanosec = np.divmod(stamp, 1_000_000_000)
+        stamps = ((sec & 0xFFFFFFFF) | (nanosec << 32)).astype(np.uint64)
+        every = [f'{g}.sec' for g in range(drive + 1)]
+        force = [[f'{g}.force_{axis}' for axis in 'xyz'] for g in range(drive + 1)]
+        torque = [[f'{g}.torque_{axis}' for axis in 'xyz'] for g in range(drive + 1)]
+        for a in range(0, len(stamp), block.n):
+            b = min(a + block.n, len(stamp))
             n = b - a
-            sec, nanosec = sec_all[a:b], nanosec_all[a:b]
-            g_last = len(wrenches) + 1
-            for g in range(g_last + 1):
-                fields[f'{g}.sec'][:n], fields[f'{g}.nanosec'][:n] = sec, nanosec
-            for g, (force, torque) in enumerate(wrenches):
-                for i, axis in enumerate('xyz'):
-                    fields[f'{g}.force_{axis}'][:n] = force[a:b, i]
-                    fields[f'{g}.torque_{axis}'][:n] = torque[a:b, i]
-            g = len(wrenches)          # unbalance: U omega^2, couple moment
-            force, torque = unbalance_wrench(self.static, self.couple, omega[a:b])
-            for i, axis in enumerate('xy'):
-                fields[f'{g}.force_{axis}'][:n] = force[i]
-                fields[f'{g}.torque_{axis}'][:n] = torque[i]
-            fields[f'{g_last}.torque_z'][:n] = result.drive_torque[a:b]
-            self.writer.write_block(self.block, log_time[a:b], n)
+            block.put(every, stamps[a:b], n, '<u8')
+            for g, (f, m) in enumerate(wrenches):       # (n, 3) arrays: rows are .T
+                block.put(force[g], f[a:b].T, n)
+                block.put(torque[g], m[a:b].T, n)
+            f, m = unbalance_wrench(self.static, self.couple, omega[a:b])  # U omega^2, couple
+            block.put(force[unbalance][:2], f[:2], n)
+            block.put(torque[unbalance][:2], m[:2], n)
+            block.put(torque[drive][2:], result.drive_torque[a:b], n)
+            self.writer.write_block(block, log_time[a:b], n)
 
 
 def _account(segment, model, result, omega):
