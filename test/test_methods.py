@@ -125,3 +125,43 @@ def test_unbalance_vector_is_smooth_where_its_norm_has_a_kink():
     norm = [np.linalg.norm(vector(1.0 + d)) for d in (-step, 0.0, step)]
     assert (norm[1] - norm[0]) / step == pytest.approx(-40.0, rel=1e-5)
     assert (norm[2] - norm[1]) / step == pytest.approx(40.0, rel=1e-5)
+
+
+def bench_rows():
+    import csv
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / 'docs' / 'bench.csv'
+    rows = []
+    with open(path, newline='') as stream:
+        for row in csv.DictReader(stream):
+            row['samples'] = int(row['samples'])
+            if row['samples']:
+                row['seconds_per_sample'] = float(row['seconds_per_sample'])
+                row['max_relative_error'] = float(row['max_relative_error'])
+            rows.append(row)
+    return rows
+
+
+def test_engine_is_on_the_pareto_front_of_every_scene_of_the_bench():
+    """docs/bench.csv (cvc-balance bench): no method both faster and more accurate."""
+    rows = bench_rows()
+    scenes = list(dict.fromkeys(r['scene'] for r in rows))
+    assert scenes == ['planar', 'axial offsets', 'tilt', 'spin-up', 'near-balance',
+                      '1e5 components']
+    for scene in scenes:
+        assert 'aggregated' in pareto_front(rows, scene), scene
+
+
+def test_bench_table_is_the_current_engine():
+    """The CSV's engine errors are what the engine gives now (same scenes, same seed)."""
+    from cvc_balance.bench import scenes
+    rows = {(r['scene'], r['method']): r for r in bench_rows()}
+    prepare, compute = METHODS['aggregated']
+    for scene, (layout, q, omega, alpha, gravity) in scenes(np.random.default_rng(0)).items():
+        if scene == '1e5 components':
+            continue                                # its reference takes a minute
+        reference = exact_loads(layout, q, omega, alpha, gravity)
+        result = compute(prepare(layout), q, omega, alpha, gravity)
+        error = max(_relative(got, ref) for got, ref in zip(result, reference))
+        assert error == pytest.approx(rows[(scene, 'aggregated')]['max_relative_error'],
+                                      rel=1e-6, abs=1e-18)
