@@ -1,6 +1,8 @@
 """
-No more model than a scene needs: which model is taken, that it stays within the stated
-tolerance against the 40-digit reference, and that it costs no more than the full one.
+No more model than a scene needs.
+
+Which model is taken, that it stays within the stated tolerance against the 40-digit
+reference, and that it costs no more than the full one.
 """
 
 import math
