@@ -11,6 +11,8 @@ fixed-layout messages are gathered for all messages of a chunk at once.
 
 from collections import deque
 from dataclasses import dataclass, field
+import mmap
+import os
 import struct
 import threading
 
@@ -67,7 +69,10 @@ class Bag:
         self.path = str(path)
         try:
             with open(self.path, 'rb') as stream:
-                self._bytes = stream.read()
+                # Mapped, not read: the file's pages are shared with the page cache.
+                size = os.fstat(stream.fileno()).st_size
+                self._bytes = mmap.mmap(stream.fileno(), size, access=mmap.ACCESS_READ) \
+                    if size else b''
         except OSError as error:
             raise BagError(f'{self.path}: cannot read bag: {error.strerror}') from None
         self.problems = []
@@ -390,9 +395,10 @@ def joint_samples(bag, channel, joint):
         return MotionSamples(*(np.zeros(0, t) for t in (np.int64, np.int64, float, float)),
                              rejected, reasons)
     stamp, log_time, angle, omega = (np.concatenate(c) for c in zip(*parts))
-    order = np.argsort(log_time, kind='stable')
-    return MotionSamples(stamp[order], log_time[order], angle[order], omega[order],
-                         rejected, reasons)
+    if np.any(log_time[1:] < log_time[:-1]):
+        order = np.argsort(log_time, kind='stable')
+        stamp, log_time, angle, omega = stamp[order], log_time[order], angle[order], omega[order]
+    return MotionSamples(stamp, log_time, angle, omega, rejected, reasons)
 
 
 def float64_samples(bag, channel):

@@ -17,6 +17,7 @@ message indexes are packed here.
 from collections import defaultdict, deque
 from concurrent.futures import ThreadPoolExecutor
 import os
+import stat
 import struct
 import threading
 
@@ -34,8 +35,8 @@ PROFILE = 'ros2'
 LIBRARY = 'cvc_balance'
 MESSAGE_HEADER = 31   # opcode 1, length 8, channel 2, sequence 4, log time 8, publish time 8
 INDEX_HEADER = 15     # opcode 1, length 8, channel 2, byte length of the entries 4
-ZSTD_LEVEL = -3
-"""zstd level of the chunks: libmcap's 'Fast' (its default 1 costs half again the time)."""
+ZSTD_LEVEL = 1
+"""zstd level of the chunks unless the writer is given one (libmcap's default too)."""
 BUFFERS = 8
 """Buffers a :class:`MessageBlock` rotates through: one filled while the others are packed."""
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
@@ -67,18 +68,69 @@ def _compressor(name, level=None):
     raise ValueError(f'unknown compression {name!r} (zstd, lz4 or none)')
 
 
+class MessageBuffer:
+    """One buffer of a :class:`MessageBlock`: n samples' records and views of their fields."""
+
+    def __init__(self, block):
+        """Make the buffer: the block's template n times."""
+        self.block = block
+        self.bytes = np.tile(block.template, block.n)
+        self.array = self.bytes.view(block.dtype)
+        self.fields = {name: self.array[name] for name in block.dtype.names}
+        self._views = {}
+
+    def put(self, names, values, count, dtype=None):
+        """
+        Set fields ``names`` of the first ``count`` samples to ``values``.
+
+        ``values`` is one row per field, (len(names), count), or one (count,)
+        row for all of them. ``dtype`` (default the first field's) is the type
+        stored at each field's offset, e.g. '<u8' over a stamp's sec and
+        nanosec. Rows go to fields evenly spaced in the block (consecutive
+        fields of one type) in one strided copy, others field by field.
+        """
+        key = (tuple(names), dtype)
+        if key not in self._views:
+            n, size, layout = self.block.n, self.block.group_size, self.block.dtype.fields
+            dtype = np.dtype(dtype or layout[names[0]][0])
+            offsets = [layout[name][1] for name in names]
+            step = offsets[1] - offsets[0] if len(offsets) > 1 else dtype.itemsize
+            together = None
+            if all(b - a == step for a, b in zip(offsets, offsets[1:])):
+                together = np.ndarray((len(names), n), dtype, self.bytes, offsets[0],
+                                      (step, size))
+            self._views[key] = (together, [np.ndarray((n,), dtype, self.bytes, offset, (size,))
+                                           for offset in offsets])
+        together, apart = self._views[key]
+        if np.ndim(values) == 1:
+            for column in apart:
+                column[:count] = values
+        elif together is not None:
+            together[:, :count] = values
+        else:
+            for column, row in zip(apart, values):
+                column[:count] = row
+
+    def set_time(self, log_time, count):
+        """Set log and publish time (ns) of every message of the first ``count`` samples."""
+        log_time = np.asarray(log_time[:count])
+        parts = range(len(self.block.channels))
+        for stamp in ('log', 'pub'):
+            self.put([f'{g}.{stamp}' for g in parts], log_time, count)
+
+
 class MessageBlock:
     """
     n samples of G fixed-layout messages each, as MCAP message records.
 
     ``parts`` is a list of (channel id, CdrLayout); sample i's G records lie
-    one after the other. Set ``array['log_time']`` and each part's fields
-    ``fields[f'{g}.{field}']`` (g = part index), then hand the block to
-    :meth:`BagWriter.write_block`.
+    one after the other. Set each part's fields ``fields[f'{g}.{field}']``
+    (g = part index; or :meth:`put` several at once), then hand the block to
+    :meth:`BagWriter.write_block`, which sets the log times.
 
-    The block rotates through up to ``buffers`` buffers, made when first
-    needed: after ``write_block`` the fields are those of another buffer,
-    which holds what was last written to it (the constant bytes of the
+    The block rotates through up to ``buffers`` :class:`MessageBuffer`, made
+    when first needed: after ``write_block`` the fields are those of another
+    buffer, which holds what was last written to it (the constant bytes of the
     template never change), so set every variable field before each write.
     """
 
@@ -105,10 +157,9 @@ class MessageBlock:
                 offsets.append(data_start + offset)
         self.group_size = len(template)
         self.n = n
-        self._template = np.frombuffer(bytes(template), np.uint8)
-        self._names = names
-        self._dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
-                                'itemsize': self.group_size})
+        self.template = np.frombuffer(bytes(template), np.uint8)
+        self.dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                               'itemsize': self.group_size})
         self._max_buffers = max(1, buffers)
         self._made, self._free, self._busy = 0, deque(), deque()
         self._current = None
@@ -117,17 +168,21 @@ class MessageBlock:
     @property
     def bytes(self):
         """Return the current buffer, uint8 (n * group_size,)."""
-        return self._buffer()[0]
+        return self.buffer().bytes
 
     @property
     def array(self):
         """Return the current buffer as a structured array of n samples."""
-        return self._buffer()[1]
+        return self.buffer().array
 
     @property
     def fields(self):
         """Return {'g.field': view of that field of the n samples} of the current buffer."""
-        return self._buffer()[2]
+        return self.buffer().fields
+
+    def put(self, names, values, count, dtype=None):
+        """Set fields of the current buffer (see :meth:`MessageBuffer.put`)."""
+        self.buffer().put(names, values, count, dtype)
 
     def record_offsets_for(self, count):
         """{channel: offsets of its records} within a chunk of ``count`` samples (cached)."""
@@ -137,60 +192,20 @@ class MessageBlock:
                                     in zip(self.channels, self.record_offsets)}
         return self._offsets[count]
 
-    def put(self, names, values, count, dtype=None):
-        """
-        Set fields ``names`` of the first ``count`` samples to ``values``.
-
-        ``values`` is one row per field, (len(names), count), or one (count,)
-        row for all of them. ``dtype`` (default the first field's) is the type
-        stored at each field's offset, e.g. '<u8' over a stamp's sec and
-        nanosec. Rows go to fields evenly spaced in the block (consecutive
-        fields of one type) in one strided copy, others field by field.
-        """
-        data, _, _, views = self._buffer()
-        key = (tuple(names), dtype)
-        if key not in views:
-            dtype = np.dtype(dtype or self._dtype.fields[names[0]][0])
-            offsets = [self._dtype.fields[name][1] for name in names]
-            step = offsets[1] - offsets[0] if len(offsets) > 1 else dtype.itemsize
-            together = None
-            if all(b - a == step for a, b in zip(offsets, offsets[1:])):
-                together = np.ndarray((len(names), self.n), dtype, data, offsets[0],
-                                      (step, self.group_size))
-            views[key] = (together, [np.ndarray((self.n,), dtype, data, offset,
-                                                (self.group_size,)) for offset in offsets])
-        together, apart = views[key]
-        if np.ndim(values) == 1:
-            for column in apart:
-                column[:count] = values
-        elif together is not None:
-            together[:, :count] = values
-        else:
-            for column, row in zip(apart, values):
-                column[:count] = row
-
-    def set_time(self, log_time, count=None):
-        """Set log and publish time (ns) of every message of the first ``count`` samples."""
-        count = self.n if count is None else count
-        log_time = np.asarray(log_time[:count])
-        for stamp in ('log', 'pub'):
-            self.put([f'{g}.{stamp}' for g in range(len(self.channels))], log_time, count)
-
     def hand_over(self, future):
         """Leave the current buffer to the writer until ``future`` is done; take another."""
-        self._busy.append((future, self._buffer()))
+        self._busy.append((future, self.buffer()))
         self._current = None
 
-    def _buffer(self):
+    def buffer(self):
+        """Return the current :class:`MessageBuffer` (a free one, waited for if need be)."""
         if self._current is None:
             while self._busy and self._busy[0][0].done():
                 self._free.append(self._busy.popleft()[1])
             if self._free:
                 self._current = self._free.popleft()
             elif self._made < self._max_buffers:
-                data = np.tile(self._template, self.n)
-                array = data.view(self._dtype)
-                self._current = (data, array, {name: array[name] for name in self._names}, {})
+                self._current = MessageBuffer(self)
                 self._made += 1
             else:
                 future, self._current = self._busy.popleft()
@@ -209,9 +224,11 @@ class BagWriter:
         lz4 0); ``chunk_bytes`` the uncompressed size of a chunk.
         """
         self.path = str(path)
+        _remove_old(self.path)
         self._file = open(self.path, 'wb', buffering=0)
         self._fd = self._file.fileno()
         self._position = 0
+        self._file_lock = threading.Lock()
         self._compression = compression
         self._compress = _compressor(compression, level)
         self._chunk_bytes = chunk_bytes
@@ -275,8 +292,9 @@ class BagWriter:
         self._flush_pending()
         count = block.n if count is None else count
         log_time = np.array(log_time[:count], dtype=np.uint64)   # kept until written
-        block.set_time(log_time, count)
-        data = block.bytes.data
+        buffer = block.buffer()
+        buffer.set_time(log_time, count)
+        data = buffer.bytes.data
         per_chunk = max(1, self._chunk_bytes // block.group_size)
         job = None
         for start in range(0, count, per_chunk):
@@ -332,17 +350,25 @@ class BagWriter:
     # -- internals -------------------------------------------------------------------
 
     def _write_all(self, parts):
-        """Write ``parts`` (bytes-like) at the end of the file in one system call."""
+        """
+        Write ``parts`` (bytes-like) at the end of the file in one system call.
+
+        Returns where they start. Records come from two threads (framing from
+        the caller's, chunks from the I/O thread): each goes out whole.
+        """
         views = [memoryview(p).cast('B') for p in parts]
         total = sum(len(v) for v in views)
-        left = total - os.writev(self._fd, views)
-        while left:                       # a short write (rare for files): the rest
-            done = sum(len(v) for v in views) - left
-            while done >= len(views[0]):
-                done -= len(views.pop(0))
-            views[0] = views[0][done:]
-            left -= os.writev(self._fd, views)
-        self._position += total
+        with self._file_lock:
+            start = self._position
+            left = total - os.writev(self._fd, views)
+            while left:                   # a short write (rare for files): the rest
+                done = sum(len(v) for v in views) - left
+                while done >= len(views[0]):
+                    done -= len(views.pop(0))
+                views[0] = views[0][done:]
+                left -= os.writev(self._fd, views)
+            self._position += total
+        return start
 
     def _emit(self, record):
         builder = RecordBuilder()
@@ -416,11 +442,10 @@ class BagWriter:
                              8 + 8 + 8 + 4 + 4 + len(compression) + 8 + len(data), start_time,
                              end_time, size, crc, len(compression), compression, len(data))
         index_records, where = self._index_records(index)
-        chunk_start = self._position
+        # Chunk and message indexes in one system call: a finished chunk survives a kill.
+        chunk_start = self._write_all([header, data, index_records])
         chunk_length = len(header) + len(data)
         index_start = chunk_start + chunk_length
-        # Chunk and message indexes in one system call: a finished chunk survives a kill.
-        self._write_all([header, data, index_records])
         self._chunk_count += 1
         _extend(self._times, start_time, end_time)
         self._chunk_indexes.append(ChunkIndex(
@@ -438,6 +463,21 @@ class BagWriter:
                           attachment_count=0, metadata_count=0, chunk_count=self._chunk_count,
                           message_start_time=start or 0, message_end_time=end or 0,
                           channel_message_counts=dict(self._counts))
+
+
+def _remove_old(path):
+    """
+    Remove an existing regular file at ``path`` (one link, not a symlink) before writing.
+
+    Replaced, not truncated: ext4 writes a truncated and rewritten file out to disk
+    when it is closed (auto_da_alloc), a tenth of a second for a replay's output.
+    """
+    try:
+        status = os.lstat(path)
+    except OSError:
+        return
+    if stat.S_ISREG(status.st_mode) and status.st_nlink == 1:
+        os.unlink(path)
 
 
 def _extend(span, start, end):

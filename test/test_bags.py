@@ -31,6 +31,7 @@ from scenario_reference import expected_outputs
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = sorted((ROOT / 'bags').glob('*.yaml'))
 JOINT = 'sensor_msgs/msg/JointState'
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
 OUTPUTS = ('/bearing_load', '/unbalance', '/drive_torque')
 
 
@@ -221,6 +222,53 @@ def test_bags_without_inputs_or_with_wrong_types_get_a_clear_message(tmp_path):
         run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay', str(path)],
                              capture_output=True, text=True)
         assert run.returncode == 2 and words in run.stderr and 'Traceback' not in run.stderr
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', ''])
+def test_block_buffers_reused_while_chunks_are_packed(compression, tmp_path):
+    """
+    Many more chunks than a block has buffers; channels added and loose messages in between.
+
+    Each buffer is refilled while earlier chunks are still being compressed and
+    written: every message must come back as it was set, in both readers.
+    """
+    from cvc_balance.cdr import string_message, wrench_stamped_layout
+    from cvc_balance.mcap_writer import BagWriter, BUFFERS
+    path = tmp_path / 'many.mcap'
+    expected, k = {'/a': [], '/b': [], '/note': []}, 0
+    with BagWriter(path, compression=compression, chunk_bytes=2048) as writer:
+        a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
+        block = writer.block([(a, wrench_stamped_layout('stator')),
+                              (b, wrench_stamped_layout('rotor'))])
+        for c in range(6 * BUFFERS):
+            if c == 2 * BUFFERS:      # a channel registered while chunks are in flight
+                note = writer.add_channel('/note', 'std_msgs/msg/String')
+            if c >= 2 * BUFFERS and c % 5 == 0:
+                writer.write(note, 1_000_000 * k, string_message(f'chunk {c}'))
+                expected['/note'].append((1_000_000 * k, f'chunk {c}'))
+            n = block.n - c % 3                  # some chunks not full
+            i = np.arange(k, k + n)
+            block.put(['0.sec', '1.sec'], i, n)
+            block.put(['0.nanosec', '1.nanosec'], i % 1000, n)
+            block.put(['0.force_x', '0.force_y', '0.force_z'], [i * 0.5, -i * 0.25, i + 0.125], n)
+            block.put(['0.torque_x', '0.torque_y', '0.torque_z'], [i * 2.0, i * 3.0, i * 4.0], n)
+            block.put(['1.force_x', '1.force_y'], [-i * 0.5, i * 0.75], n)
+            block.fields['1.torque_z'][:n] = i * 1.5
+            writer.write_block(block, 1_000_000 * i + 1, n)
+            for j in i.tolist():
+                t = 1_000_000 * j + 1
+                expected['/a'].append((t, j, j % 1000, [j * 0.5, -j * 0.25, j + 0.125,
+                                                        j * 2.0, j * 3.0, j * 4.0]))
+                expected['/b'].append((t, j, j % 1000, [-j * 0.5, j * 0.75, 0.0,
+                                                        0.0, 0.0, j * 1.5]))
+            k += n
+    assert Bag(path).problems == [] and len(Bag(path).chunks) > 5 * BUFFERS
+    for read in (read_with_rosbags, read_with_mcap_ros2):
+        got = read(path)
+        assert [(t, m.data) for t, m in got['/note']] == expected['/note']
+        for topic in ('/a', '/b'):
+            assert [(t, m.header.stamp.sec, m.header.stamp.nanosec, wrench(m))
+                    for t, m in got[topic]] == expected[topic]
 
 
 def test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk(tmp_path):
