@@ -7,8 +7,6 @@ fractions), then Newton-Euler for single-axis spin per sample. Slow (tens of us 
 component and per sample): for references, not for use.
 """
 
-from fractions import Fraction
-
 import mpmath as mp
 
 DIGITS = 40
@@ -59,12 +57,6 @@ def aggregates(layout):
         return mass, sx, sy, sz, pxz, pyz, izz
 
 
-def _mpf(value):
-    if isinstance(value, Fraction):
-        return mp.mpf(value.numerator) / value.denominator
-    return mp.mpf(value)
-
-
 def exact_loads(layout, q, omega, alpha, gravity):
     """
     Return (force_rotor, moment_rotor, drive_torque) for each sample, as floats.
@@ -78,13 +70,13 @@ def exact_loads_from_aggregates(sums, q, omega, alpha, gravity):
     """
     Return the loads as :func:`exact_loads` does, from the aggregates of :func:`aggregates`.
 
-    ``sums`` = (mass, S_x, S_y, S_z, P_xz, P_yz, I_zz), mpmath numbers or exact
-    fractions; for layouts whose aggregates are known another way.
+    ``sums`` = (mass, S_x, S_y, S_z, P_xz, P_yz, I_zz), mpmath numbers; for
+    layouts whose aggregates are known another way.
     """
     import numpy as np
     forces, moments, torques = [], [], []
     with mp.workdps(DIGITS):
-        mass, sx, sy, sz, pxz, pyz, izz = (_mpf(v) for v in sums)
+        mass, sx, sy, sz, pxz, pyz, izz = (mp.mpf(v) for v in sums)
         gx, gy, gz = (mp.mpf(v) for v in gravity)
         for qk, wk, ak in zip(q, omega, alpha):
             c, s = mp.cos(mp.mpf(qk)), mp.sin(mp.mpf(qk))
