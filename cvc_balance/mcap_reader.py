@@ -211,6 +211,11 @@ class Bag:
             if len(offsets):
                 yield buffer, offsets
 
+    def message_count(self, channel):
+        """Return the number of messages of ``channel`` the message indexes list."""
+        return sum(len(chunk.indexes.get(channel.id, ())) for chunk in self.chunks) + \
+            sum(1 for c, _ in self._loose if c == channel.id)
+
     def messages(self, channel):
         """Return [(log time ns, bytes)] of a channel, in file order (for few messages)."""
         out = []
@@ -304,21 +309,45 @@ def alike(buffer, at, spans):
     return True
 
 
-def gather(buffer, offsets, data_offset, dtype):
+def gather(buffer, offsets, data_offset, dtype, copy=True):
     """
     One field of every message: ``dtype`` at ``data_offset`` in each message's data.
 
     Records evenly spaced in the chunk (one writer, fixed layout) are read through a
-    strided view; others by gathering their bytes.
+    strided view (returned as it is with ``copy=False``: valid while ``buffer`` is);
+    others by gathering their bytes.
     """
     dtype = np.dtype(dtype)
     at = offsets + (MESSAGE_HEADER + data_offset)
     stride = _stride(at)
     if stride is not None:
-        return np.ndarray(shape=(len(at),), dtype=dtype, buffer=buffer,
-                          offset=int(at[0]), strides=(stride,)).copy()
+        view = np.ndarray(shape=(len(at),), dtype=dtype, buffer=buffer, offset=int(at[0]),
+                          strides=(stride,))
+        return view.copy() if copy else view
     columns = np.arange(dtype.itemsize)
     return buffer[at[:, None] + columns].copy().view(dtype).ravel()
+
+
+class _Columns:
+    """Columns filled part by part into arrays made once (grown if more rows come)."""
+
+    def __init__(self, dtypes, capacity):
+        self.arrays = [np.empty(capacity, dtype) for dtype in dtypes]
+        self.rows = 0
+
+    def take(self, count):
+        """Return views of the next ``count`` rows, to be filled."""
+        if self.rows + count > len(self.arrays[0]):
+            size = max(2 * len(self.arrays[0]), self.rows + count)
+            self.arrays = [np.concatenate([a[:self.rows], np.empty(size - self.rows, a.dtype)])
+                           for a in self.arrays]
+        views = [a[self.rows:self.rows + count] for a in self.arrays]
+        self.rows += count
+        return views
+
+    def filled(self):
+        """Return the filled part of each column."""
+        return [a[:self.rows] for a in self.arrays]
 
 
 def _lengths(buffer, offsets):
@@ -350,7 +379,9 @@ def joint_samples(bag, channel, joint):
     numpy; others are decoded message by message. Messages without the joint
     (or its position and velocity) are counted as rejected.
     """
-    parts, rejected, reasons = [], 0, []
+    rejected, reasons = 0, []
+    # Filled in place, chunk by chunk: sized by the message indexes, where there are some.
+    columns = _Columns((np.int64, np.int64, float, float), bag.message_count(channel))
     for buffer, offsets in bag.message_offsets(channel):
         lengths = _lengths(buffer, offsets)
         first = buffer[offsets[0] + MESSAGE_HEADER:offsets[0] + 9 + int(lengths[0])].tobytes()
@@ -361,12 +392,13 @@ def joint_samples(bag, channel, joint):
             # All but the stamp alike: encapsulation, frame id and joint names.
             uniform = alike(buffer, offsets + MESSAGE_HEADER, ((0, 4), (12, names_end)))
         if uniform:
-            parts.append((
-                gather(buffer, offsets, fields['sec'], '<i4').astype(np.int64) * 1_000_000_000
-                + gather(buffer, offsets, fields['nanosec'], '<u4'),
-                log_times(buffer, offsets).astype(np.int64),
-                gather(buffer, offsets, fields['position'], '<f8'),
-                gather(buffer, offsets, fields['velocity'], '<f8')))
+            stamp, log_time, angle, omega = columns.take(len(offsets))
+            np.multiply(gather(buffer, offsets, fields['sec'], '<i4', copy=False),
+                        1_000_000_000, out=stamp, dtype=np.int64)
+            stamp += gather(buffer, offsets, fields['nanosec'], '<u4', copy=False)
+            log_time[:] = gather(buffer, offsets - MESSAGE_HEADER + 15, 0, '<u8', copy=False)
+            angle[:] = gather(buffer, offsets, fields['position'], '<f8', copy=False)
+            omega[:] = gather(buffer, offsets, fields['velocity'], '<f8', copy=False)
             continue
         rows = []
         for offset, length in zip(offsets.tolist(), lengths.tolist()):
@@ -388,13 +420,9 @@ def joint_samples(bag, channel, joint):
                          struct.unpack_from('<d', data, f['position'])[0],
                          struct.unpack_from('<d', data, f['velocity'])[0]))
         if rows:
-            columns = list(zip(*rows))
-            parts.append((np.array(columns[0], np.int64), np.array(columns[1], np.int64),
-                          np.array(columns[2], float), np.array(columns[3], float)))
-    if not parts:
-        return MotionSamples(*(np.zeros(0, t) for t in (np.int64, np.int64, float, float)),
-                             rejected, reasons)
-    stamp, log_time, angle, omega = (np.concatenate(c) for c in zip(*parts))
+            for column, values in zip(columns.take(len(rows)), zip(*rows)):
+                column[:] = values
+    stamp, log_time, angle, omega = columns.filled()
     if np.any(log_time[1:] < log_time[:-1]):
         order = np.argsort(log_time, kind='stable')
         stamp, log_time, angle, omega = stamp[order], log_time[order], angle[order], omega[order]

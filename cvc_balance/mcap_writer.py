@@ -39,6 +39,8 @@ ZSTD_LEVEL = 1
 """zstd level of the chunks unless the writer is given one (libmcap's default too)."""
 BUFFERS = 8
 """Buffers a :class:`MessageBlock` rotates through: one filled while the others are packed."""
+CACHED = 8
+"""Chunks last written whose pages stay in the page cache (see BagWriter._let_go)."""
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 _INDEX_HEADER = np.dtype([('op', 'u1'), ('len', '<u8'), ('ch', '<u2'), ('n', '<u4')])
 _QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {durability}\n'
@@ -229,6 +231,7 @@ class BagWriter:
         self._fd = self._file.fileno()
         self._position = 0
         self._file_lock = threading.Lock()
+        self._written = deque()
         self._compression = compression
         self._compress = _compressor(compression, level)
         self._chunk_bytes = chunk_bytes
@@ -370,6 +373,23 @@ class BagWriter:
             self._position += total
         return start
 
+    def _let_go(self, start, length):
+        """
+        Start writing a chunk out to disk; drop the page cache of one written CACHED chunks ago.
+
+        A bag is written once: its pages need not stay cached, and on virtual
+        machines whose freed memory goes back to the host, new page-cache pages
+        cost more than compressing the data. Pages not yet written out stay
+        cached (nothing waits for the disk).
+        """
+        if not hasattr(os, 'posix_fadvise'):
+            return
+        os.posix_fadvise(self._fd, start, length, os.POSIX_FADV_DONTNEED)   # write-out starts
+        self._written.append((start, length))
+        if len(self._written) > CACHED:
+            start, length = self._written.popleft()
+            os.posix_fadvise(self._fd, start, length, os.POSIX_FADV_DONTNEED)   # clean: dropped
+
     def _emit(self, record):
         builder = RecordBuilder()
         record.write(builder)
@@ -445,6 +465,7 @@ class BagWriter:
         # Chunk and message indexes in one system call: a finished chunk survives a kill.
         chunk_start = self._write_all([header, data, index_records])
         chunk_length = len(header) + len(data)
+        self._let_go(chunk_start, chunk_length + len(index_records))
         index_start = chunk_start + chunk_length
         self._chunk_count += 1
         _extend(self._times, start_time, end_time)
