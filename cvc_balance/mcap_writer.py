@@ -8,10 +8,11 @@ compressed (and their CRC taken) on the writer's worker threads, straight
 from the buffer they were built in, and written in order by one I/O thread
 with one system call per chunk (chunk record and its message indexes), so a
 process killed at any moment loses at most the chunks not yet written (the
-one being filled and those in flight). Buffers are reused: on this kind of
-machine touching fresh memory costs more than compressing it. The framing
-records come from the ``mcap`` package; only chunks, message records and
-message indexes are packed here.
+one being filled and those in flight). Buffers are reused, and the page cache
+of written chunks is let go once they are on disk: on virtual machines that
+hand freed memory back to the host, touching new pages costs more than
+compressing them. The framing records come from the ``mcap`` package; only
+chunks, message records and message indexes are packed here.
 """
 
 from collections import defaultdict, deque
