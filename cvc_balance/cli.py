@@ -83,6 +83,11 @@ def _parser():
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
     replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
+    replay.add_argument('--tolerance', type=_tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
+                        help='largest change accepted in the forces (N), moments (N m) and '
+                        'drive torque (N m), inf for an output not asked: each layout takes '
+                        "the smallest model within it over its samples' speeds and "
+                        'accelerations, and the summary says which')
     replay.set_defaults(run=_replay)
 
     view = commands.add_parser('view', help='log every sample of a bag to a rerun .rrd',
@@ -189,7 +194,8 @@ def _replay(args):
     summary = replay(args.bag, args.output, args.layout, args.joint_name,
                      args.alpha_time_constant, args.max_speed,
                      '' if args.compression == 'none' else args.compression,
-                     progress_bar() if show else None, observer=logger)
+                     progress_bar() if show else None, observer=logger,
+                     tolerance=Tolerance(*args.tolerance) if args.tolerance else None)
     if logger:
         logger.finish()
     print(format_summary(summary))

@@ -23,6 +23,7 @@ from cvc_balance.layout_file import layout_from_text
 from cvc_balance.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
                                      MotionSamples, string_samples)
 from cvc_balance.mcap_writer import BagWriter
+from cvc_balance.model_choice import choose_model, Envelope
 from cvc_balance.motion import acceleration_series, accepted_samples
 from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
@@ -51,6 +52,9 @@ class Segment:
     peak_support: dict = field(default_factory=dict)
     peak_total: float = 0.0
     max_speed: float = 0.0
+    model: str = 'rigid bodies'
+    model_line: str = ''
+    deviation: object = None       # model_choice.Deviation when a tolerance was given
 
 
 @dataclass
@@ -98,12 +102,15 @@ def read_inputs(bag, joint_name):
 
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
            time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
-           observer=None):
+           observer=None, tolerance=None):
     """
     Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary.
 
     ``observer`` (e.g. a rerun RunLogger) gets ``layout(start_ns, model)`` for each
     layout and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
+    ``tolerance`` (a :class:`cvc_balance.model_choice.Tolerance`): each layout is
+    computed with the smallest model within it over the speeds and accelerations of
+    its own samples, and the segment says which.
     """
     started = time.perf_counter()
     bag = Bag(bag_path)
@@ -151,15 +158,23 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     bounds = [e[0] for e in events[1:]] + [np.iinfo(np.int64).max]
     done = 0
     for (start_ns, layout), end_ns in zip(events, bounds):
-        model = RotorModel.from_layout(layout)
+        lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
         segment = Segment(layout, int(start_ns))
+        if tolerance is None:
+            model = RotorModel.from_layout(layout)
+        else:
+            envelope = Envelope(float(np.abs(omega[lo:hi]).max(initial=0.0)),
+                                float(np.abs(alpha[lo:hi]).max(initial=0.0)))
+            choice = choose_model(layout, tolerance, envelope)
+            model, segment.model, segment.deviation = choice.model, choice.name, \
+                choice.deviation
+            segment.model_line = choice.describe()
         summary.segments.append(segment)
         blocks = OutputBlocks(writer, channels, model) if writer else None
         if observer is not None:
             first = np.searchsorted(log_time, start_ns)
             observer.layout(int(stamp[first]) if first < len(stamp) else max(int(start_ns), 0),
                             model)
-        lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
         for a in range(lo, hi, BLOCK):
             b = min(a + BLOCK, hi)
             result = loads(model, angle[a:b], omega[a:b], alpha[a:b])
@@ -285,6 +300,8 @@ def format_summary(summary):
             verdict = 'WITHIN' if a.within_grade else 'OUT OF'
             lines.append(f'  unbalance: {planes}; achieved G {a.equivalent_grade:.3g} at '
                          f'{speed:.4g} rad/s -> {verdict} G {a.grade:g}')
+        if segment.model_line:
+            lines.append(f'  {segment.model_line}')
     rate = summary.accepted / summary.seconds if summary.seconds else 0.0
     lines.append(f'{summary.accepted} samples in {summary.seconds:.3f} s '
                  f'({rate / 1e6:.3f} M samples/s, read + compute'

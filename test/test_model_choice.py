@@ -170,3 +170,22 @@ def test_solve_says_which_model_it_took(tmp_path):
         assert summary['model'] == choice.name
     assert solve('1e9', 'inf', 'inf')['model'] == 'point masses, planar'
     assert all(v == 0.0 for v in solve('1e9', 'inf', 'inf')['moment_rotor'])
+
+
+def test_replay_takes_per_layout_the_smallest_model_within_the_tolerance():
+    """The bundled tilted bag: every layout's model said; peaks within its deviation."""
+    from pathlib import Path
+    from cvc_balance.replay import format_summary, replay
+    bag = Path(__file__).resolve().parents[1] / 'bags' / 'tilted_shift.mcap'
+    full = replay(bag)
+    for tolerance, expected in ((Tolerance(1e9), 'point masses, planar'),
+                                (Tolerance(100.0), 'point masses'),
+                                (Tolerance(1.0, 1.0, 1.0), 'rigid bodies')):
+        reduced = replay(bag, tolerance=tolerance)
+        text = format_summary(reduced)
+        for segment, reference in zip(reduced.segments, full.segments):
+            assert segment.model == expected
+            assert f'model: {expected} (' in text
+            for name, peak in segment.peak_support.items():
+                assert abs(peak - reference.peak_support[name]) <= \
+                    segment.deviation.force + 1e-9 * peak
