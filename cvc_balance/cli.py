@@ -134,21 +134,22 @@ def _parser():
     return parser
 
 
-def _finite(text):
+def _number(text):
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+
+
+def _finite(text):
+    value = _number(text)
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f'must be finite, got {text!r}')
     return value
 
 
 def _tolerance(text):
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    value = _number(text)
     if not value >= 0.0:
         raise argparse.ArgumentTypeError(f'must be >= 0 (or inf), got {text!r}')
     return value

@@ -85,11 +85,6 @@ def scale(x, b):
     return _quick_two_sum(p, e + x[1] * b)
 
 
-def product(a, b):
-    """Exact product of two float64 arrays, as a double-double."""
-    return two_prod(np.asarray(a, float), np.asarray(b, float))
-
-
 def negate(x):
     """Return -x."""
     return -x[0], -x[1]

@@ -101,14 +101,14 @@ def place(mass, inertia_own, radius, angle, z):
     z = np.broadcast_to(np.asarray(z, dtype=float), mass.shape)
     c, s = dd.cos_sin(angle)
     x, y = dd.scale(c, radius), dd.scale(s, radius)          # centre of mass, rotor frame
-    first = [dd.scale(x, mass), dd.scale(y, mass), dd.product(mass, z)]
+    first = [dd.scale(x, mass), dd.scale(y, mass), dd.two_prod(mass, z)]
     # The shift to O (tensor elements: products enter with a minus sign).
     m_x2, m_y2 = dd.mul(first[0], x), dd.mul(first[1], y)
     m_z2 = dd.scale(first[2], z)
     elements = {
         (0, 0): dd.add(m_y2, m_z2),
         (1, 1): dd.add(m_x2, m_z2),
-        (2, 2): dd.scale(dd.product(radius, radius), mass),
+        (2, 2): dd.scale(dd.two_prod(radius, radius), mass),
         (0, 1): dd.negate(dd.mul(first[0], y)),
         (0, 2): dd.negate(dd.scale(first[0], z)),
         (1, 2): dd.negate(dd.scale(first[1], z)),
@@ -165,21 +165,11 @@ def tube_elements(mass, inner_radius, outer_radius, length, axis='axial'):
     return _axisymmetric(along, across, axis)
 
 
-def box(mass, size):
-    """Solid box with edges (radial, tangential, axial) = ``size`` (m)."""
-    return tensor_from_elements(*box_elements(mass, size))
-
-
 def box_elements(mass, size):
-    """Solid box's tensor elements (ixx, iyy, izz, ixy, ixz, iyz), own frame."""
+    """Solid box's tensor elements (ixx, iyy, izz, ixy, ixz, iyz), own frame; ``size`` m."""
     a, b, c = size
     return (mass * (b**2 + c**2) / 12.0, mass * (a**2 + c**2) / 12.0,
             mass * (a**2 + b**2) / 12.0, 0.0, 0.0, 0.0)
-
-
-def sphere(mass, radius):
-    """Solid sphere about its centre."""
-    return tensor_from_elements(*sphere_elements(mass, radius))
 
 
 def sphere_elements(mass, radius):

@@ -354,9 +354,9 @@ def _lengths(buffer, offsets):
     return gather(buffer, offsets - MESSAGE_HEADER + 1, 0, '<u8') if len(offsets) else offsets
 
 
-def log_times(buffer, offsets):
-    """Log times (ns) of the messages at ``offsets``."""
-    return gather(buffer, offsets - MESSAGE_HEADER + 15, 0, '<u8')
+def log_times(buffer, offsets, copy=True):
+    """Log times (ns) of the messages at ``offsets`` (``copy`` as in :func:`gather`)."""
+    return gather(buffer, offsets - MESSAGE_HEADER + 15, 0, '<u8', copy)
 
 
 @dataclass
@@ -396,7 +396,7 @@ def joint_samples(bag, channel, joint):
             np.multiply(gather(buffer, offsets, fields['sec'], '<i4', copy=False),
                         1_000_000_000, out=stamp, dtype=np.int64)
             stamp += gather(buffer, offsets, fields['nanosec'], '<u4', copy=False)
-            log_time[:] = gather(buffer, offsets - MESSAGE_HEADER + 15, 0, '<u8', copy=False)
+            log_time[:] = log_times(buffer, offsets, copy=False)
             angle[:] = gather(buffer, offsets, fields['position'], '<f8', copy=False)
             omega[:] = gather(buffer, offsets, fields['velocity'], '<f8', copy=False)
             continue

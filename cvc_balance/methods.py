@@ -121,19 +121,13 @@ def newton_euler(layout):
                                c.z]), own_inertia(c), c.angle) for c in layout.components]
 
 
-def _rz(angle):
+def _rotation(angle, axis):
+    """Rotation matrices (..., 3, 3) by ``angle`` about coordinate axis ``axis`` (0 x, 2 z)."""
+    i, j = [k for k in range(3) if k != axis]
     c, s = np.cos(angle), np.sin(angle)
     out = np.zeros(np.shape(angle) + (3, 3))
-    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
-    out[..., 2, 2] = 1.0
-    return out
-
-
-def _rx(angle):
-    c, s = np.cos(angle), np.sin(angle)
-    out = np.zeros(np.shape(angle) + (3, 3))
-    out[..., 1, 1], out[..., 1, 2], out[..., 2, 1], out[..., 2, 2] = c, -s, s, c
-    out[..., 0, 0] = 1.0
+    out[..., i, i], out[..., i, j], out[..., j, i], out[..., j, j] = c, -s, s, c
+    out[..., axis, axis] = 1.0
     return out
 
 
@@ -144,7 +138,7 @@ def _newton_euler(bodies, q, omega, alpha, gravity, orientation):
     a = np.zeros((n, 3))
     a[:, 2] = alpha
     g = np.broadcast_to(np.asarray(gravity, float), (n, 3))
-    rotor = _rz(q)
+    rotor = _rotation(q, 2)
     force, moment = np.zeros((n, 3)), np.zeros((n, 3))
     for m, centre, own, theta in bodies:
         r = rotor @ centre                                   # stator frame, (n, 3)
@@ -167,14 +161,15 @@ def _newton_euler(bodies, q, omega, alpha, gravity, orientation):
 def newton_euler_compute(bodies, q, omega, alpha, gravity):
     """Newton-Euler, each body's orientation a rotation matrix Rz(q + theta)."""
     return _newton_euler(bodies, q, omega, alpha, gravity,
-                         lambda q, theta: _rz(q + theta))
+                         lambda q, theta: _rotation(q + theta, 2))
 
 
 def euler_zxz_compute(bodies, q, omega, alpha, gravity):
     """Newton-Euler, orientation from ZXZ Euler angles (q, 0, theta): Rz Rx Rz."""
     zero = np.zeros(len(q))
     return _newton_euler(bodies, q, omega, alpha, gravity,
-                         lambda q, theta: _rz(q) @ _rx(zero) @ _rz(np.full(len(q), theta)))
+                         lambda q, theta: _rotation(q, 2) @ _rotation(zero, 0)
+                         @ _rotation(np.full(len(q), theta), 2))
 
 
 def zxz_angle_rates(precession, nutation, spin, omega_body):

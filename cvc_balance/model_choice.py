@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from cvc_balance.engine import own_elements, RotorModel
+from cvc_balance.engine import own_elements, RotorModel, support_loads
 from cvc_balance.frames import tensors_from_elements
 
 
@@ -126,7 +126,7 @@ def choose_model(layout, tolerance, envelope, gravity=None):
 
 
 def _support_force(supports, moment):
-    # Two supports share a moment as opposite forces, |dM| / span each; one takes it whole.
-    if len(supports) == 2:
-        return moment / abs(supports[1].z - supports[0].z)
-    return 0.0
+    # A moment alone, split as the engine splits loads: two supports take it as opposite
+    # forces (|dM| / span each); one takes it whole, as a moment.
+    per_support = support_loads(supports, 0.0, 0.0, 0.0, moment, 0.0)
+    return max(math.hypot(*force) for force, _ in per_support)

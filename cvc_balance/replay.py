@@ -52,9 +52,7 @@ class Segment:
     peak_support: dict = field(default_factory=dict)
     peak_total: float = 0.0
     max_speed: float = 0.0
-    model: str = 'rigid bodies'
-    model_line: str = ''
-    deviation: object = None       # model_choice.Deviation when a tolerance was given
+    choice: object = None      # model_choice.ModelChoice when a tolerance was given
 
 
 @dataclass
@@ -165,10 +163,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         else:
             envelope = Envelope(float(np.abs(omega[lo:hi]).max(initial=0.0)),
                                 float(np.abs(alpha[lo:hi]).max(initial=0.0)))
-            choice = choose_model(layout, tolerance, envelope)
-            model, segment.model, segment.deviation = choice.model, choice.name, \
-                choice.deviation
-            segment.model_line = choice.describe()
+            segment.choice = choose_model(layout, tolerance, envelope)
+            model = segment.choice.model
         summary.segments.append(segment)
         blocks = OutputBlocks(writer, channels, model) if writer else None
         if observer is not None:
@@ -300,8 +296,8 @@ def format_summary(summary):
             verdict = 'WITHIN' if a.within_grade else 'OUT OF'
             lines.append(f'  unbalance: {planes}; achieved G {a.equivalent_grade:.3g} at '
                          f'{speed:.4g} rad/s -> {verdict} G {a.grade:g}')
-        if segment.model_line:
-            lines.append(f'  {segment.model_line}')
+        if segment.choice is not None:
+            lines.append(f'  {segment.choice.describe()}')
     rate = summary.accepted / summary.seconds if summary.seconds else 0.0
     lines.append(f'{summary.accepted} samples in {summary.seconds:.3f} s '
                  f'({rate / 1e6:.3f} M samples/s, read + compute'

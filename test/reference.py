@@ -160,3 +160,20 @@ def relative_error(value, reference):
     """|value - reference| / |reference| over whole vectors (scale-aware, not per element)."""
     value, reference = np.asarray(value, float), np.asarray(reference, float)
     return float(np.linalg.norm(value - reference) / max(np.linalg.norm(reference), 1e-300))
+
+
+def method_error(name, layout, q, omega, alpha, gravity=None):
+    """
+    Largest relative error of a method (cvc_balance.methods) against the 40-digit reference.
+
+    The bench's measure: each output's deviation over the samples, scaled by the
+    reference's largest value of that output.
+    """
+    from cvc_balance.bench import _relative
+    from cvc_balance.exact import exact_loads
+    from cvc_balance.methods import METHODS
+    gravity = layout.gravity if gravity is None else gravity
+    reference = exact_loads(layout, q, omega, alpha, gravity)
+    prepare, compute = METHODS[name]
+    result = compute(prepare(layout), q, omega, alpha, gravity)
+    return max(_relative(got, ref) for got, ref in zip(result, reference))

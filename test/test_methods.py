@@ -14,7 +14,7 @@ from cvc_balance.bench import _relative, pareto_front
 from cvc_balance.exact import exact_loads
 from cvc_balance.layout import parse_layout
 from cvc_balance.methods import METHODS
-from reference import pinocchio_loads, random_layout, relative_error
+from reference import method_error, pinocchio_loads, random_layout, relative_error
 
 
 @pytest.fixture(scope='module')
@@ -28,10 +28,8 @@ def case():
 
 
 def error_of(name, case):
-    _, layout, q, omega, alpha, reference = case
-    prepare, compute = METHODS[name]
-    result = compute(prepare(layout), q, omega, alpha, layout.gravity)
-    return max(_relative(got, ref) for got, ref in zip(result, reference))
+    _, layout, q, omega, alpha, _ = case
+    return method_error(name, layout, q, omega, alpha)
 
 
 def test_reference_agrees_with_pinocchio(case):
@@ -83,11 +81,7 @@ def test_pareto_front_reading():
 @pytest.mark.parametrize('omega', [1e-12, 1e-3, 1e3, 1e4])
 def test_engine_exact_from_rest_to_very_high_speed(omega, case):
     _, layout, q, _, alpha, _ = case
-    speeds = np.full(len(q), omega)
-    reference = exact_loads(layout, q, speeds, alpha, layout.gravity)
-    prepare, compute = METHODS['aggregated']
-    result = compute(prepare(layout), q, speeds, alpha, layout.gravity)
-    assert max(_relative(got, ref) for got, ref in zip(result, reference)) < 1e-13
+    assert method_error('aggregated', layout, q, np.full(len(q), omega), alpha) < 1e-13
 
 
 @pytest.mark.parametrize('scale', [1e-6, 1e-3, 1.0, 1e2, 1e4])
@@ -100,10 +94,7 @@ def test_engine_exact_for_masses_from_a_milligram_to_ten_tonnes(scale):
             item['inertia'] = {k: v * scale / 40.0 for k, v in item['inertia'].items()}
     layout = parse_layout(mapping)
     q, omega, alpha = rng.uniform(0, 6, 6), rng.uniform(5, 25, 6), rng.uniform(-4, 4, 6)
-    reference = exact_loads(layout, q, omega, alpha, layout.gravity)
-    prepare, compute = METHODS['aggregated']
-    result = compute(prepare(layout), q, omega, alpha, layout.gravity)
-    assert max(_relative(got, ref) for got, ref in zip(result, reference)) < 1e-13
+    assert method_error('aggregated', layout, q, omega, alpha) < 1e-13
 
 
 def test_unbalance_vector_is_smooth_where_its_norm_has_a_kink():
@@ -156,12 +147,9 @@ def test_bench_table_is_the_current_engine():
     """The CSV's engine errors are what the engine gives now (same scenes, same seed)."""
     from cvc_balance.bench import scenes
     rows = {(r['scene'], r['method']): r for r in bench_rows()}
-    prepare, compute = METHODS['aggregated']
     for scene, (layout, q, omega, alpha, gravity) in scenes(np.random.default_rng(0)).items():
         if scene == '1e5 components':
             continue                                # its reference takes a minute
-        reference = exact_loads(layout, q, omega, alpha, gravity)
-        result = compute(prepare(layout), q, omega, alpha, gravity)
-        error = max(_relative(got, ref) for got, ref in zip(result, reference))
+        error = method_error('aggregated', layout, q, omega, alpha, gravity)
         assert error == pytest.approx(rows[(scene, 'aggregated')]['max_relative_error'],
                                       rel=1e-6, abs=1e-18)

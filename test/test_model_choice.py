@@ -184,8 +184,8 @@ def test_replay_takes_per_layout_the_smallest_model_within_the_tolerance():
         reduced = replay(bag, tolerance=tolerance)
         text = format_summary(reduced)
         for segment, reference in zip(reduced.segments, full.segments):
-            assert segment.model == expected
+            assert segment.choice.name == expected
             assert f'model: {expected} (' in text
             for name, peak in segment.peak_support.items():
                 assert abs(peak - reference.peak_support[name]) <= \
-                    segment.deviation.force + 1e-9 * peak
+                    segment.choice.deviation.force + 1e-9 * peak
