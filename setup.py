@@ -27,8 +27,8 @@ setup(
     entry_points={
         'console_scripts': [
             'cvc-balance = cvc_balance.cli:main',
-            'balance-monitor = cvc_balance.balance_monitor:main',
-            'balance_monitor = cvc_balance.balance_monitor:main',
+            'balance-monitor = cvc_balance.ros.balance_monitor:main',
+            'balance_monitor = cvc_balance.ros.balance_monitor:main',
         ],
     },
 )

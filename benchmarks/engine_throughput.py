@@ -2,7 +2,7 @@
 Samples per second of the vectorised engine, for few and for many components.
 
 Prints, for N = 10 and N = 100000 components, the time to aggregate the
-layout (once) and the samples/s of :func:`cvc_balance.engine.loads` over a
+layout (once) and the samples/s of :func:`cvc_balance.physics.engine.loads` over a
 block of motion samples (best of several repeats), and the ratio of the
 per-sample costs. Run: ./dev.sh run python benchmarks/engine_throughput.py
 """
@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from cvc_balance.engine import loads, RotorModel
-from cvc_balance.layout import parse_layout
+from cvc_balance.physics.engine import loads, RotorModel
+from cvc_balance.physics.layout import parse_layout
 
 
 def layout_with(n, rng):

@@ -46,7 +46,7 @@ class Probe:
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from geometry_msgs.msg import WrenchStamped
         from sensor_msgs.msg import JointState
-        from cvc_balance.balance_monitor import input_qos
+        from cvc_balance.ros.balance_monitor import input_qos
 
         self.rclpy = rclpy
         rclpy.init()
@@ -139,7 +139,7 @@ def main():
     layout = ROOT / 'config' / 'ct_gantry.yaml'
     processes = [subprocess.Popen([sys.executable, *command], stdout=log,
                                   stderr=subprocess.STDOUT, cwd=ROOT) for command in (
-        ['-m', 'cvc_balance.balance_monitor', '--ros-args', '-p', f'layout_file:={layout}'],
+        ['-m', 'cvc_balance.ros.balance_monitor', '--ros-args', '-p', f'layout_file:={layout}'],
         [str(HERE / 'relay_node.py'), '--ros-args', '-r', 'joint_states:=relay_in'])]
     probe = Probe()
     stop = threading.Event()

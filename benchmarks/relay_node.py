@@ -9,7 +9,7 @@ import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from cvc_balance.balance_monitor import input_qos, OUTPUT_QOS, spin
+from cvc_balance.ros.balance_monitor import input_qos, OUTPUT_QOS, spin
 from geometry_msgs.msg import WrenchStamped
 
 

@@ -5,7 +5,7 @@ Makes a bag of 10^6 JointState samples (1 kHz, 1000 s, with layout messages) by
 simulation, then times in the same process:
 
 * rosbags: iterate every message (AnyReader) and deserialise every JointState;
-* ``cvc_balance.replay``: read + vectorised compute + write all outputs (bearing load,
+* ``cvc_balance.bag.replay``: read + vectorised compute + write all outputs (bearing load,
   2 supports, unbalance, drive torque: five WrenchStamped per sample, and the layouts)
   with zstd chunks, lz4 chunks and uncompressed chunks, and read + compute without
   output. Each is the wall-clock time of the whole ``replay`` call (open, read,
@@ -23,8 +23,8 @@ import time
 
 import yaml
 
-from cvc_balance.replay import replay
-from cvc_balance.scenario import load_scenario, write_bag
+from cvc_balance.bag.replay import replay
+from cvc_balance.bag.scenario import load_scenario, write_bag
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGURATIONS = (('zstd', 'zstd'), ('lz4', 'lz4'), ('uncompressed', ''), ('no output', None))

@@ -164,14 +164,14 @@ def relative_error(value, reference):
 
 def method_error(name, layout, q, omega, alpha, gravity=None):
     """
-    Largest relative error of a method (cvc_balance.methods) against the 40-digit reference.
+    Largest relative error of a method (cvc_balance.study.methods) against the 40-digit reference.
 
     The bench's measure: each output's deviation over the samples, scaled by the
     reference's largest value of that output.
     """
-    from cvc_balance.bench import _relative
-    from cvc_balance.exact import exact_loads
-    from cvc_balance.methods import METHODS
+    from cvc_balance.study.bench import _relative
+    from cvc_balance.study.exact import exact_loads
+    from cvc_balance.study.methods import METHODS
     gravity = layout.gravity if gravity is None else gravity
     reference = exact_loads(layout, q, omega, alpha, gravity)
     prepare, compute = METHODS[name]

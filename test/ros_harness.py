@@ -1,10 +1,12 @@
 """
 Test harness for the node: run it as its own process, talk to it from a probe node.
 
-Each test run gets its own ROS_DOMAIN_ID (from the process id) and keeps DDS
-discovery on this machine (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+Each test run takes a ROS_DOMAIN_ID no other run on this machine holds (a lock file
+per id, held for the run's life) and keeps DDS discovery on this machine
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), so two copies of the suite can run at once.
 """
 
+import fcntl
 import os
 import signal
 import subprocess
@@ -15,7 +17,27 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 
-DOMAIN_ID = 1 + os.getpid() % 200
+DOMAIN_IDS = [i for i in range(1, 101) if i != 42]
+"""Ids whose DDS ports stay below Linux's ephemeral range (42: the demo's)."""
+_LOCK_DIR = os.environ.get('CVC_BALANCE_LOCK_DIR', '/tmp')
+
+
+def _claim_domain_id():
+    """Return a domain id locked for this process (the lock dies with it)."""
+    start = os.getpid() % len(DOMAIN_IDS)
+    for domain in DOMAIN_IDS[start:] + DOMAIN_IDS[:start]:
+        lock = open(os.path.join(_LOCK_DIR, f'cvc_balance_ros_domain_{domain}.lock'), 'w')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _claim_domain_id.lock = lock      # kept open: the id stays ours until we exit
+        return domain
+    raise RuntimeError('every ROS domain id 1-100 is held by another test run')
+
+
+DOMAIN_ID = _claim_domain_id()
 
 
 def ros_environment():

@@ -6,11 +6,11 @@ samples, the live estimator (plain floats) gives alpha, and the engine's one-sam
 gives every output.
 """
 
-from cvc_balance.engine import RotorModel, sample_loads
-from cvc_balance.layout import parse_layout
-from cvc_balance.motion import AccelerationEstimator
-from cvc_balance.scenario import load_scenario
-from cvc_balance.unbalance import couple_unbalance, static_unbalance
+from cvc_balance.bag.scenario import load_scenario
+from cvc_balance.physics.engine import RotorModel, sample_loads
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.physics.motion import AccelerationEstimator
+from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance
 
 
 def expected_outputs(scenario_file):

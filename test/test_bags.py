@@ -20,11 +20,11 @@ import pytest
 from rosbags.highlevel import AnyReader
 import yaml
 
-from cvc_balance.engine import RotorModel
-from cvc_balance.mcap_reader import Bag, BagError, joint_samples
-from cvc_balance.replay import replay
-from cvc_balance.scenario import load_scenario, write_bag
-from cvc_balance.unbalance import static_unbalance
+from cvc_balance.bag.mcap_reader import Bag, BagError, joint_samples
+from cvc_balance.bag.replay import replay
+from cvc_balance.bag.scenario import load_scenario, write_bag
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.unbalance import static_unbalance
 from ros_harness import ros_environment
 from scenario_reference import expected_outputs
 
@@ -202,8 +202,8 @@ def test_corrupt_chunk_is_skipped_and_said(tmp_path):
 
 
 def test_bags_without_inputs_or_with_wrong_types_get_a_clear_message(tmp_path):
-    from cvc_balance.mcap_writer import BagWriter
-    from cvc_balance.cdr import string_message
+    from cvc_balance.bag.mcap_writer import BagWriter
+    from cvc_balance.messages.cdr import string_message
     empty = tmp_path / 'layout_only.mcap'
     with BagWriter(empty) as writer:
         channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
@@ -232,8 +232,8 @@ def test_block_buffers_reused_while_chunks_are_packed(compression, tmp_path):
     Each buffer is refilled while earlier chunks are still being compressed and
     written: every message must come back as it was set, in both readers.
     """
-    from cvc_balance.cdr import string_message, wrench_stamped_layout
-    from cvc_balance.mcap_writer import BagWriter, BUFFERS
+    from cvc_balance.bag.mcap_writer import BagWriter, BUFFERS
+    from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
     path = tmp_path / 'many.mcap'
     expected, k = {'/a': [], '/b': [], '/note': []}, 0
     with BagWriter(path, compression=compression, chunk_bytes=2048) as writer:

@@ -21,9 +21,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 import yaml
 
-from cvc_balance.engine import RotorModel, sample_loads
-from cvc_balance.layout_file import layout_from_text
-from cvc_balance.unbalance import couple_unbalance, static_unbalance
+from cvc_balance.physics.engine import RotorModel, sample_loads
+from cvc_balance.physics.layout_file import layout_from_text
+from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance
 from reference import relative_error
 from ros_harness import NodeProcess, Probe
 
@@ -112,7 +112,7 @@ def start_node(tmp_path, layout, *extra, params=None):
     params_path.write_text(yaml.safe_dump({'balance_monitor': {'ros__parameters': {
         'joint_name': 'spin', 'stator_frame': 'gantry_base', 'diagnostics_period': 0.2,
         'layout_file': str(layout_path), **(params or {})}}}))
-    return NodeProcess('cvc_balance.balance_monitor',
+    return NodeProcess('cvc_balance.ros.balance_monitor',
                        ['--params-file', str(params_path), '-p', 'rotor_frame:=gantry_rotor',
                         *extra], tmp_path / 'node.log')
 
@@ -308,7 +308,7 @@ def test_bad_layout_file_at_start_keeps_the_node_up(probe, tmp_path):
 @pytest.mark.parametrize('setting, word', [('alpha_time_constant:=-1.0', 'out of range'),
                                            ('max_speed:=fast', 'DOUBLE')])
 def test_bad_parameter_gets_one_line_and_exit_code_2(setting, word, tmp_path):
-    node = NodeProcess('cvc_balance.balance_monitor', ['-p', setting], tmp_path / 'node.log')
+    node = NodeProcess('cvc_balance.ros.balance_monitor', ['-p', setting], tmp_path / 'node.log')
     assert node.process.wait(30) == 2
     lines = node.log().strip().splitlines()
     assert len(lines) == 1 and word in lines[0] and 'Traceback' not in lines[0]

@@ -7,7 +7,7 @@ import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.typesys import get_typestore, Stores
 
-from cvc_balance.cdr import WrenchStampedEncoder
+from cvc_balance.messages.cdr import WrenchStampedEncoder
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -41,7 +41,7 @@ def test_same_length_as_rclpy_serialisation():
 def test_block_layout_and_per_message_encoder_give_the_same_bytes(frame_id):
     """The numpy template (bags) and the struct encoder (live node) must never drift apart."""
     import numpy as np
-    from cvc_balance.cdr import wrench_stamped_layout
+    from cvc_balance.messages.cdr import wrench_stamped_layout
     layout = wrench_stamped_layout(frame_id)
     data = bytearray(layout.template)
     values = {'sec': 7, 'nanosec': 123, 'force_x': 1.5, 'force_y': -2.0, 'force_z': 3.25,

@@ -9,9 +9,9 @@ import sys
 import pytest
 import yaml
 
-from cvc_balance.engine import RotorModel
-from cvc_balance.layout import LayoutError, parse_layout
-from cvc_balance.layout_file import layout_from_text, load_layout
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.layout import LayoutError, parse_layout
+from cvc_balance.physics.layout_file import layout_from_text, load_layout
 
 ROOT = Path(__file__).resolve().parents[1]
 GANTRY = ROOT / 'config' / 'ct_gantry.yaml'

@@ -16,8 +16,8 @@ import pytest
 
 from rosbags.highlevel import AnyReader
 
-from cvc_balance.mcap_reader import Bag, wrench_samples
-from cvc_balance.replay import replay
+from cvc_balance.bag.mcap_reader import Bag, wrench_samples
+from cvc_balance.bag.replay import replay
 from ros_harness import NodeProcess, ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,7 +38,7 @@ def outputs(path):
 def test_live_and_offline_replay_agree(name, record, tmp_path):
     bag = ROOT / 'bags' / f'{name}.mcap'
     extra = ['-p', f'record_path:={tmp_path / "node.mcap"}'] if record else []
-    node = NodeProcess('cvc_balance.balance_monitor', extra, tmp_path / 'node.log')
+    node = NodeProcess('cvc_balance.ros.balance_monitor', extra, tmp_path / 'node.log')
     live = tmp_path / 'live.mcap'
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
                           str(live)], env=ros_environment(), capture_output=True, text=True,

@@ -1,5 +1,5 @@
 """
-The ways to compute the loads, judged by the 40-digit reference (cvc_balance.exact).
+The ways to compute the loads, judged by the 40-digit reference (cvc_balance.study.exact).
 
 The reference itself is checked against Pinocchio; then each method's accuracy regime:
 the aggregated engine and Newton-Euler (matrices or ZXZ Euler angles) exact to rounding;
@@ -10,10 +10,10 @@ bearing moment and the alpha terms; float32 at its epsilon.
 import numpy as np
 import pytest
 
-from cvc_balance.bench import _relative, pareto_front
-from cvc_balance.exact import exact_loads
-from cvc_balance.layout import parse_layout
-from cvc_balance.methods import METHODS
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.study.bench import _relative, pareto_front
+from cvc_balance.study.exact import exact_loads
+from cvc_balance.study.methods import METHODS
 from reference import method_error, pinocchio_loads, random_layout, relative_error
 
 
@@ -99,8 +99,8 @@ def test_engine_exact_for_masses_from_a_milligram_to_ten_tonnes(scale):
 
 def test_unbalance_vector_is_smooth_where_its_norm_has_a_kink():
     """Thesis Eq. 4.16-4.19: |F| kinks at balance; the vector's derivative does not jump."""
-    from cvc_balance.engine import RotorModel
-    from cvc_balance.unbalance import static_unbalance
+    from cvc_balance.physics.engine import RotorModel
+    from cvc_balance.physics.unbalance import static_unbalance
 
     def vector(r2):
         model = RotorModel.from_layout(parse_layout({
@@ -145,7 +145,7 @@ def test_engine_is_on_the_pareto_front_of_every_scene_of_the_bench():
 
 def test_bench_table_is_the_current_engine():
     """The CSV's engine errors are what the engine gives now (same scenes, same seed)."""
-    from cvc_balance.bench import scenes
+    from cvc_balance.study.bench import scenes
     rows = {(r['scene'], r['method']): r for r in bench_rows()}
     for scene, (layout, q, omega, alpha, gravity) in scenes(np.random.default_rng(0)).items():
         if scene == '1e5 components':

@@ -11,10 +11,10 @@ import time
 import numpy as np
 import pytest
 
-from cvc_balance.engine import loads, RotorModel
-from cvc_balance.exact import exact_loads
-from cvc_balance.layout import parse_layout
-from cvc_balance.model_choice import choose_model, Envelope, Tolerance
+from cvc_balance.physics.engine import loads, RotorModel
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.physics.model_choice import choose_model, Envelope, Tolerance
+from cvc_balance.study.exact import exact_loads
 from reference import random_layout
 
 SUPPORTS = [{'name': 'front', 'z': -0.4}, {'name': 'rear', 'z': 0.4, 'axial': True}]
@@ -162,7 +162,7 @@ def test_solve_says_which_model_it_took(tmp_path):
                               '--tolerance', *tolerance], capture_output=True, text=True)
         assert run.returncode == 0, run.stderr
         return json.loads(run.stdout)
-    from cvc_balance.layout_file import load_layout
+    from cvc_balance.physics.layout_file import load_layout
     layout = load_layout(layout_file)
     for tolerance in (('1e9', 'inf', 'inf'), ('1', '1', '1')):
         summary = solve(*tolerance)
@@ -175,7 +175,7 @@ def test_solve_says_which_model_it_took(tmp_path):
 def test_replay_takes_per_layout_the_smallest_model_within_the_tolerance():
     """The bundled tilted bag: every layout's model said; peaks within its deviation."""
     from pathlib import Path
-    from cvc_balance.replay import format_summary, replay
+    from cvc_balance.bag.replay import format_summary, replay
     bag = Path(__file__).resolve().parents[1] / 'bags' / 'tilted_shift.mcap'
     full = replay(bag)
     for tolerance, expected in ((Tolerance(1e9), 'point masses, planar'),

@@ -5,7 +5,7 @@ import random
 
 import pytest
 
-from cvc_balance.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.physics.motion import AccelerationEstimator, AngleIntegrator, sample_problem
 
 
 def test_ramp_is_followed_without_lag():

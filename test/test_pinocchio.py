@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import yaml
 
-from cvc_balance.engine import loads, RotorModel, sample_loads
-from cvc_balance.layout import parse_layout
+from cvc_balance.physics.engine import loads, RotorModel, sample_loads
+from cvc_balance.physics.layout import parse_layout
 from reference import pinocchio_loads, random_layout, relative_error
 
 TOLERANCE = 1e-9

@@ -12,9 +12,9 @@ import math
 from hypothesis import given, settings, strategies as st
 import numpy as np
 
-from cvc_balance.engine import loads, RotorModel, sample_loads
-from cvc_balance.layout import parse_layout
-from cvc_balance.unbalance import couple_unbalance, plane_unbalances, static_unbalance
+from cvc_balance.physics.engine import loads, RotorModel, sample_loads
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 SUPPORTS = [{'name': 'front', 'z': -0.3}, {'name': 'rear', 'z': 0.35, 'axial': True}]
 ZERO_G = [0.0, 0.0, 0.0]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from cvc_balance.layout_file import load_layout
+from cvc_balance.physics.layout_file import load_layout
 from scenario_reference import expected_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,7 +107,7 @@ def test_live_node_logs_the_same_view(tmp_path):
     from ros_harness import NodeProcess, ros_environment
 
     out = tmp_path / 'live.rrd'
-    node = NodeProcess('cvc_balance.balance_monitor',
+    node = NodeProcess('cvc_balance.ros.balance_monitor',
                        ['-p', 'rerun:=save', '-p', f'rerun_target:={out}', '-p',
                         'rerun_every:=10'], tmp_path / 'node.log')
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play',
@@ -130,9 +130,9 @@ def test_live_node_logs_the_same_view(tmp_path):
 
 def test_shapes_below_the_view_resolution_are_drawn_as_points(tmp_path):
     """A 3 mm screw on a gantry is a point; a 30 cm box stays a box."""
-    from cvc_balance.engine import RotorModel
-    from cvc_balance.layout import parse_layout
-    from cvc_balance.rerun_log import open_recording, RunLogger, view_resolution
+    from cvc_balance.physics.engine import RotorModel
+    from cvc_balance.physics.layout import parse_layout
+    from cvc_balance.view.rerun_log import open_recording, RunLogger, view_resolution
     layout = parse_layout({
         'name': 'screws', 'supports': [{'name': 'a', 'z': -0.3},
                                        {'name': 'b', 'z': 0.3, 'axial': True}],

@@ -1,7 +1,7 @@
 """
 Where methods fail, and the engine must not: each regime judged by extended precision.
 
-* double-double arithmetic (cvc_balance.compensated) against mpmath at 60 digits;
+* double-double arithmetic (cvc_balance.physics.compensated) against mpmath at 60 digits;
 * near-balance: a rotor balanced to 1e-9 of its mass moment keeps its residual;
 * 10^6 components, balanced in pairs to ~1e-11, against aggregates summed exactly
   (dyadic masses, radii and offsets on 64 angles: integer sums times 60-digit cosines);
@@ -16,13 +16,13 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from cvc_balance import compensated
-from cvc_balance.bench import _near_balance, _relative
-from cvc_balance.engine import RotorModel
-from cvc_balance.exact import exact_loads_from_aggregates
-from cvc_balance.inertia import place
-from cvc_balance.layout import parse_layout
-from cvc_balance.methods import zxz_angle_rates
+from cvc_balance.physics import compensated
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.inertia import place
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.study.bench import _near_balance, _relative
+from cvc_balance.study.exact import exact_loads_from_aggregates
+from cvc_balance.study.methods import zxz_angle_rates
 from reference import method_error, random_layout
 
 
@@ -153,7 +153,7 @@ def test_a_million_components_keep_a_residual_of_1e_11_of_their_mass_moment(mill
     # Loads of the model built on these aggregates, against the exact ones.
     model = RotorModel(None, body, body.mass, *body.first_moment, -body.inertia[0, 2],
                        -body.inertia[1, 2], body.inertia[2, 2], (0.0, 0.0, 0.0))
-    from cvc_balance.engine import rotor_frame_loads
+    from cvc_balance.physics.engine import rotor_frame_loads
     q = np.linspace(0.0, 6.0, 7)
     omega, alpha = np.full(7, 23.27), np.full(7, 1.5)
     got = rotor_frame_loads(model, np.cos(q), np.sin(q), omega, alpha, (0.0, 0.0, 0.0))

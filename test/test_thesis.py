@@ -20,10 +20,10 @@ import math
 import numpy as np
 import pytest
 
-from cvc_balance.engine import RotorModel, sample_loads
-from cvc_balance.frames import products_of_inertia
-from cvc_balance.inertia import parallel_axis_cvc, solid_cylinder, tube
-from cvc_balance.layout import parse_layout
+from cvc_balance.physics.engine import RotorModel, sample_loads
+from cvc_balance.physics.frames import products_of_inertia
+from cvc_balance.physics.inertia import parallel_axis_cvc, solid_cylinder, tube
+from cvc_balance.physics.layout import parse_layout
 
 M, R1, OMEGA, G = 40.0, 1.0, 12.0, 9.81   # Sec. 4.1.1: "based upon ... a CT scanner"
 HALF_SPAN = 0.5                             # bearings at z = -L/2, +L/2

@@ -12,12 +12,12 @@ import mpmath
 import numpy as np
 import pytest
 
-from cvc_balance import iso21940
-from cvc_balance.assessment import assess_balance
-from cvc_balance.engine import RotorModel
-from cvc_balance.layout import parse_layout
-from cvc_balance.layout_file import load_layout
-from cvc_balance.unbalance import couple_unbalance, plane_unbalances, static_unbalance
+from cvc_balance.physics import iso21940
+from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.physics.layout_file import load_layout
+from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 mpmath.mp.dps = 50
 GANTRY = Path(__file__).resolve().parents[1] / 'config' / 'ct_gantry.yaml'

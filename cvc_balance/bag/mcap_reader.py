@@ -18,7 +18,7 @@ import threading
 
 import numpy as np
 
-from cvc_balance.cdr import ENCAPSULATION_LE, find_joint_state_fields, read_string_message
+from cvc_balance.messages.cdr import ENCAPSULATION_LE, find_joint_state_fields, read_string_message
 
 try:    # ISA-L's CRC-32 (zlib's polynomial) runs ~15 times faster than zlib's here
     from isal.isal_zlib import crc32
@@ -168,7 +168,7 @@ class Bag:
         The next few chunks are decompressed (and checked) on the worker threads
         while the caller parses the current one.
         """
-        from cvc_balance.workers import pool
+        from cvc_balance.physics.workers import pool
         numbers, ahead = iter(numbers), deque()
         while True:
             while len(ahead) < AHEAD:

@@ -29,8 +29,8 @@ from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Schema, 
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
-from cvc_balance.mcap_reader import crc32
-from cvc_balance.msg_schema import schema_text
+from cvc_balance.bag.mcap_reader import crc32
+from cvc_balance.messages.msg_schema import schema_text
 
 PROFILE = 'ros2'
 LIBRARY = 'cvc_balance'

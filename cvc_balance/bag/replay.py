@@ -8,24 +8,23 @@ the same outputs and frames. No ROS graph is needed.
 
 from dataclasses import dataclass, field
 import math
-import sys
 import time
 
 import numpy as np
 
-from cvc_balance import topics
-from cvc_balance.assessment import assess_balance
-from cvc_balance.cdr import string_message, wrench_stamped_layout
-from cvc_balance.engine import loads, RotorModel
-from cvc_balance.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
-from cvc_balance.layout import LayoutError
-from cvc_balance.layout_file import layout_from_text
-from cvc_balance.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
-                                     MotionSamples, string_samples)
-from cvc_balance.mcap_writer import BagWriter
-from cvc_balance.model_choice import choose_model, Envelope
-from cvc_balance.motion import acceleration_series, accepted_samples
-from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
+from cvc_balance.bag.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
+                                         MotionSamples, string_samples)
+from cvc_balance.bag.mcap_writer import BagWriter
+from cvc_balance.messages import topics
+from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
+from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.engine import loads, RotorModel
+from cvc_balance.physics.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
+from cvc_balance.physics.layout import LayoutError
+from cvc_balance.physics.layout_file import layout_from_text
+from cvc_balance.physics.model_choice import choose_model, Envelope
+from cvc_balance.physics.motion import acceleration_series, accepted_samples
+from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
 JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
 STRING, WRENCH = topics.STRING_TYPE, topics.WRENCH_TYPE
@@ -106,7 +105,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
 
     ``observer`` (e.g. a rerun RunLogger) gets ``layout(start_ns, model)`` for each
     layout and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
-    ``tolerance`` (a :class:`cvc_balance.model_choice.Tolerance`): each layout is
+    ``tolerance`` (a :class:`cvc_balance.physics.model_choice.Tolerance`): each layout is
     computed with the smallest model within it over the speeds and accelerations of
     its own samples, and the segment says which.
     """
@@ -117,7 +116,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     summary.samples = len(motion.stamp) + motion.rejected
     summary.reasons = list(motion.reasons)
     if layout_file is not None:
-        from cvc_balance.layout_file import load_layout
+        from cvc_balance.physics.layout_file import load_layout
         events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
     else:
         events = []
@@ -304,15 +303,3 @@ def format_summary(summary):
                  f'{" + write" if summary.output else ""})'
                  + (f'; wrote {summary.output}' if summary.output else ''))
     return '\n'.join(lines)
-
-
-def progress_bar(stream=sys.stderr, width=30):
-    """Return a progress callback drawing a bar on ``stream`` (a terminal)."""
-    def show(done, total):
-        filled = int(width * done / max(total, 1))
-        stream.write(f'\rreplay [{"#" * filled}{"." * (width - filled)}] '
-                     f'{100 * done / max(total, 1):5.1f} %')
-        if done >= total:
-            stream.write('\n')
-        stream.flush()
-    return show

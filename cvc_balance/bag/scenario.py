@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from cvc_balance.cdr import joint_state_layout, string_message
-from cvc_balance.frames import radians, STANDARD_GRAVITY, wrap_angle
-from cvc_balance.layout import LayoutError, parse_layout
-from cvc_balance.mcap_writer import BagWriter, MessageBlock
+from cvc_balance.bag.mcap_writer import BagWriter, MessageBlock
+from cvc_balance.messages.cdr import joint_state_layout, string_message
+from cvc_balance.physics.frames import radians, STANDARD_GRAVITY, wrap_angle
+from cvc_balance.physics.layout import LayoutError, parse_layout
 
 
 class ScenarioError(ValueError):

@@ -1,16 +1,16 @@
 """
 A rotor's balance against its ISO 21940-11 grade: the service engineer's view.
 
-Combines :mod:`cvc_balance.unbalance` (where the unbalance is, what corrects
-it) with :mod:`cvc_balance.iso21940` (how much is allowed) for one speed.
+Combines :mod:`cvc_balance.physics.unbalance` (where the unbalance is, what corrects
+it) with :mod:`cvc_balance.physics.iso21940` (how much is allowed) for one speed.
 SI inside (kg m, rad/s, rad); the grade in mm/s as the standard names it.
 """
 
 from dataclasses import dataclass
 
-from cvc_balance import iso21940
-from cvc_balance.frames import polar
-from cvc_balance.unbalance import couple_unbalance, plane_unbalances, static_unbalance
+from cvc_balance.physics import iso21940
+from cvc_balance.physics.frames import polar
+from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 
 @dataclass(frozen=True)

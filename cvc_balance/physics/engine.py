@@ -17,7 +17,7 @@ the stator (minus the support reaction on the rotor), about O, rotor frame:
     M_y = (S x g_r)_y + alpha P_yz + omega^2 P_xz,   M_z = 0
     drive torque = I_zz alpha - (S x g_r)_z
 
-Frames, signs and units are those of :mod:`cvc_balance.frames`. numpy only.
+Frames, signs and units are those of :mod:`cvc_balance.physics.frames`. numpy only.
 """
 
 from dataclasses import dataclass
@@ -25,11 +25,11 @@ import math
 
 import numpy as np
 
-from cvc_balance import inertia as shapes
-from cvc_balance.frames import (products_of_inertia, tensor_from_elements,
-                                tensors_from_elements, turn_xy)
-from cvc_balance.inertia import place
-from cvc_balance.workers import pool
+from cvc_balance.physics import inertia as shapes
+from cvc_balance.physics.frames import (products_of_inertia, tensor_from_elements,
+                                        tensors_from_elements, turn_xy)
+from cvc_balance.physics.inertia import place
+from cvc_balance.physics.workers import pool
 
 CHUNK = 1 << 16
 """Samples per block in the vectorised path: the temporaries stay in cache."""
@@ -42,7 +42,7 @@ class RotorModel:
 
     ``body`` holds the full mass properties; the scalars below are what the
     per-sample equations read (kg, kg m, kg m^2, m/s^2). A reduced model
-    (:mod:`cvc_balance.model_choice`) has ``own_inertia`` False (components
+    (:mod:`cvc_balance.physics.model_choice`) has ``own_inertia`` False (components
     taken as point masses) or ``moments`` False (the bearing-moment terms not
     evaluated: M_x = M_y = 0 about O).
     """
@@ -63,7 +63,7 @@ class RotorModel:
     @classmethod
     def from_layout(cls, layout, own_inertia=True, moments=True, own_tensors=None):
         """
-        Aggregate a validated :class:`cvc_balance.layout.Layout`.
+        Aggregate a validated :class:`cvc_balance.physics.layout.Layout`.
 
         ``own_tensors``: the components' own tensors, (n, 3, 3), when already
         computed (:func:`own_tensors_of`).

@@ -10,15 +10,15 @@ frame, by the thesis's CVC parallel-axis theorem
 (Eq. 3.7, with its last line corrected: NOTES.md erratum 5).
 
 Units: kg, m, kg m, kg m^2. Tensors hold tensor elements (see
-:mod:`cvc_balance.frames`). numpy only.
+:mod:`cvc_balance.physics.frames`). numpy only.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from cvc_balance import compensated as dd
-from cvc_balance.frames import tensor_from_elements
+from cvc_balance.physics import compensated as dd
+from cvc_balance.physics.frames import tensor_from_elements
 
 SHAPE_AXES = ('radial', 'tangential', 'axial')
 """Directions a shape's symmetry axis can take, own-frame x, y, z."""
@@ -91,7 +91,7 @@ def place(mass, inertia_own, radius, angle, z):
 
     The terms are those of :func:`parallel_axis_cvc` (the own tensor turned by
     theta, plus the shift), evaluated and summed in double-double
-    (:mod:`cvc_balance.compensated`): each aggregate is within an ulp or so of
+    (:mod:`cvc_balance.physics.compensated`): each aggregate is within an ulp or so of
     the exact sum for the given numbers, so a layout balanced to 1e-9 of its mass
     moment keeps its residual unbalance to ~1e-16, not ~1e-7.
     """

@@ -6,7 +6,7 @@ mapping (parsed from YAML or JSON) into a validated, immutable
 :class:`Layout`, or raises :class:`LayoutError` with one line naming the
 component and the field that is wrong. Lengths m, masses kg, angles rad
 (``angle_deg`` accepted at the edge), gravity m/s^2 in the stator frame.
-No file I/O: :mod:`cvc_balance.layout_file` reads files and text.
+No file I/O: :mod:`cvc_balance.physics.layout_file` reads files and text.
 """
 
 from dataclasses import asdict, dataclass
@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from cvc_balance.frames import DEFAULT_GRAVITY, radians, tensor_from_elements
+from cvc_balance.physics.frames import DEFAULT_GRAVITY, radians, tensor_from_elements
 
 SHAPE_FIELDS = {
     'point': (),

@@ -4,7 +4,7 @@ import json
 
 import yaml
 
-from cvc_balance.layout import LayoutError, parse_layout
+from cvc_balance.physics.layout import LayoutError, parse_layout
 
 
 def layout_from_text(text, source='layout'):

@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from cvc_balance.engine import own_elements, RotorModel, support_loads
-from cvc_balance.frames import tensors_from_elements
+from cvc_balance.physics.engine import own_elements, RotorModel, support_loads
+from cvc_balance.physics.frames import tensors_from_elements
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ the update is O(1) and stays well conditioned for irregular sample times.
 
 import math
 
-from cvc_balance.frames import wrap_angle
+from cvc_balance.physics.frames import wrap_angle
 
 
 class AccelerationEstimator:

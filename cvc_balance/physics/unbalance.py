@@ -2,7 +2,7 @@
 Static, couple and dynamic unbalance of a rotor, and its correction masses.
 
 Everything here is a property of the layout (no motion sample needed) and is
-read off the aggregates of :class:`cvc_balance.engine.RotorModel`, O(1):
+read off the aggregates of :class:`cvc_balance.physics.engine.RotorModel`, O(1):
 
 * static unbalance U = int r_xy dm = (S_x, S_y), kg m;
 * couple unbalance (P_xz, P_yz) about the centre of mass, kg m^2, with
@@ -21,7 +21,7 @@ Amounts SI (kg m, kg m^2, kg), angles rad in the rotor frame.
 from dataclasses import dataclass
 import math
 
-from cvc_balance.frames import polar
+from cvc_balance.physics.frames import polar
 
 
 @dataclass(frozen=True)

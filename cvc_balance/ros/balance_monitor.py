@@ -4,7 +4,7 @@ ROS 2 node ``balance_monitor``: live bearing loads, drive torque and unbalance.
 A thin adapter: it turns ``joint_states`` (or ``speed``) samples and the
 ``layout`` into engine calls and publishes the results from the input
 callback, with no timer in between. The per-message path is plain Python
-floats (:func:`cvc_balance.engine.sample_loads`), O(1) in the number of
+floats (:func:`cvc_balance.physics.engine.sample_loads`), O(1) in the number of
 components; layout aggregates are computed once per layout.
 
 Subscriptions (relative names): ``joint_states`` (sensor_msgs/JointState,
@@ -26,44 +26,24 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rcl_interfaces.msg import ParameterType
 import rclpy
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from cvc_balance import topics
-from cvc_balance.assessment import assess_balance
-from cvc_balance.cdr import WrenchStampedEncoder
-from cvc_balance.engine import RotorModel, sample_loads
-from cvc_balance.frames import degrees, ROTOR_FRAME, STATOR_FRAME
-from cvc_balance.layout import LayoutError
-from cvc_balance.layout_file import layout_from_text, load_layout
-from cvc_balance.motion import AccelerationEstimator, AngleIntegrator, sample_problem
-from cvc_balance.recorder import BagRecorder
-from cvc_balance.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
+from cvc_balance.messages import topics
+from cvc_balance.messages.cdr import WrenchStampedEncoder
+from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.engine import RotorModel, sample_loads
+from cvc_balance.physics.frames import degrees, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.physics.layout import LayoutError
+from cvc_balance.physics.layout_file import layout_from_text, load_layout
+from cvc_balance.physics.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
+from cvc_balance.ros.executor import spin
+from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
+from cvc_balance.ros.recorder import BagRecorder
 
-LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                        reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
-OUTPUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 THROTTLE_S = 1.0
-
-
-def input_qos(depth):
-    """
-    Return the sensor-data QoS (best effort, volatile) with a deeper history.
-
-    The preset's 5 messages are 5 ms of a 1 kHz encoder: on a busy 2-core
-    machine a process is descheduled that long often enough to lose about
-    1.5 % of the samples (measured). 50 sufficed for the node alone; with its
-    own recording and four processes on two cores, runs of 20-40 samples were
-    lost; 200 (the default) absorbed them in every run.
-    """
-    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
-                      reliability=qos_profile_sensor_data.reliability,
-                      durability=qos_profile_sensor_data.durability)
 
 
 PARAMETERS = (
@@ -144,7 +124,7 @@ class BalanceMonitor(Node):
         self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
         self._rerun = None
         if self.params['rerun']:
-            from cvc_balance.rerun_log import open_recording, RunLogger
+            from cvc_balance.view.rerun_log import open_recording, RunLogger
             self._rerun = RunLogger(open_recording(self.params['rerun'],
                                                    self.params['rerun_target'],
                                                    name=self.get_fully_qualified_name()),
@@ -377,29 +357,6 @@ class BalanceMonitor(Node):
 
 def _text(value):
     return f'{value:.6g}' if isinstance(value, float) else str(value)
-
-
-def spin(node):
-    """
-    Spin ``node`` until the context shuts down (SIGINT, SIGTERM): the events executor.
-
-    rclpy's experimental EventsExecutor answers faster than the default one; its
-    spin() busy-waits holding the GIL in this rclpy (7.1), so it is driven by
-    spin_once with a timeout, which also lets the signal handlers stop it.
-    """
-    try:
-        from rclpy.experimental import EventsExecutor
-        executor = EventsExecutor(context=node.context)
-    except ImportError:  # an rclpy without it: the default executor
-        executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    try:
-        while rclpy.ok(context=node.context):
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
 
 
 def main(args=None):

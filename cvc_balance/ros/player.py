@@ -17,19 +17,19 @@ import subprocess
 import sys
 import time
 
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-from cvc_balance import topics
-from cvc_balance.mcap_reader import Bag, BagError
-from cvc_balance.recorder import message_class
+from cvc_balance.bag.mcap_reader import Bag, BagError
+from cvc_balance.messages import topics
+from cvc_balance.messages.cdr import read_string_message
+from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
+from cvc_balance.ros.recorder import message_class
 
 LAYOUT_PAUSE = 0.05
 
 
 def output_topics(layout_texts):
     """Output topics of the node for the layouts a bag holds (their supports)."""
-    from cvc_balance.layout import LayoutError
-    from cvc_balance.layout_file import layout_from_text
+    from cvc_balance.physics.layout import LayoutError
+    from cvc_balance.physics.layout_file import layout_from_text
     names = list(topics.OUTPUTS)
     for text in layout_texts:
         try:
@@ -46,8 +46,6 @@ def output_topics(layout_texts):
 def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5):
     """Publish the bag's inputs; return (messages published, recorder's report or None)."""
     import rclpy
-    from cvc_balance.balance_monitor import input_qos
-    from cvc_balance.cdr import read_string_message
 
     bag = Bag(bag_path)
     for problem in bag.problems:
@@ -56,9 +54,7 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, s
     for topic, msg_type, qos in (
             (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, input_qos(1000)),
             (topics.SPEED, topics.FLOAT64_TYPE, input_qos(1000)),
-            (topics.LAYOUT, topics.STRING_TYPE,
-             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL))):
+            (topics.LAYOUT, topics.STRING_TYPE, LAYOUT_QOS)):
         channel = bag.channel(topic, msg_type)
         if channel is not None:
             inputs.append((topic, msg_type, qos, bag.messages(channel)))

@@ -14,8 +14,9 @@ import importlib
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from cvc_balance import topics
-from cvc_balance.mcap_writer import BagWriter
+from cvc_balance.bag.mcap_writer import BagWriter
+from cvc_balance.messages import topics
+from cvc_balance.ros.executor import spin
 
 DEFAULT_TOPICS = (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT, *topics.OUTPUTS,
                   topics.support_load('*'), topics.DIAGNOSTICS)
@@ -104,7 +105,6 @@ class BagRecorder:
 def record_main(args):
     """Run ``cvc-balance record``: record until SIGINT or SIGTERM; return the exit code."""
     import rclpy
-    from cvc_balance.balance_monitor import spin
 
     rclpy.init(args=['cvc_balance_record', '--ros-args', *args.ros_args])
     node = rclpy.create_node('cvc_balance_recorder')

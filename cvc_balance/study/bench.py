@@ -2,9 +2,9 @@
 ``cvc-balance bench``: every method's error against its cost, scene by scene.
 
 For each scene (planar, axial offsets, tilt, spin-up, near-balance, 10^5 components)
-every method of :mod:`cvc_balance.methods` computes the loads over motion samples; its
+every method of :mod:`cvc_balance.study.methods` computes the loads over motion samples; its
 cost is the best wall time per sample of three runs, its error the largest relative
-deviation from the 40-digit reference (:mod:`cvc_balance.exact`) over the samples (each
+deviation from the 40-digit reference (:mod:`cvc_balance.study.exact`) over the samples (each
 output scaled by the reference's largest value of it). Writes a CSV and a log-log chart
 (error against time per sample, one mark per method per scene) and prints the table.
 """
@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from cvc_balance.exact import exact_loads
-from cvc_balance.frames import STANDARD_GRAVITY
-from cvc_balance.layout import parse_layout
-from cvc_balance.methods import METHODS
+from cvc_balance.physics.frames import STANDARD_GRAVITY
+from cvc_balance.physics.layout import parse_layout
+from cvc_balance.study.exact import exact_loads
+from cvc_balance.study.methods import METHODS
 
 WORK_LIMIT = 3e7      # body- or particle-samples a method may be given per run
 
@@ -76,8 +76,8 @@ def scenes(rng):
 
 def _near_balance(layout):
     """Two point masses that cancel static and couple unbalance, off by 1e-9."""
-    from cvc_balance.exact import aggregates
-    from cvc_balance.layout import Component
+    from cvc_balance.physics.layout import Component
+    from cvc_balance.study.exact import aggregates
     from dataclasses import replace
     mass, sx, sy, sz, pxz, pyz, _ = (float(v) for v in aggregates(layout))
     z1, z2, radius = -0.25, 0.25, 0.6

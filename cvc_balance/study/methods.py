@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from cvc_balance.engine import loads, own_inertia, RotorModel, rotor_frame_loads
-from cvc_balance.frames import turn_xy
+from cvc_balance.physics.engine import loads, own_inertia, RotorModel, rotor_frame_loads
+from cvc_balance.physics.frames import turn_xy
 
 
 def _zeros_moment(n):

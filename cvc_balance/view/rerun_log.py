@@ -24,9 +24,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from cvc_balance.assessment import assess_balance
-from cvc_balance.iso21940 import permissible_unbalance
-from cvc_balance.unbalance import static_unbalance, unbalance_wrench
+from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.iso21940 import permissible_unbalance
+from cvc_balance.physics.unbalance import static_unbalance, unbalance_wrench
 
 TIMELINE = 'time'
 NEWTONS_PER_METRE = 20000.0

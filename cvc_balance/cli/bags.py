@@ -1,0 +1,149 @@
+"""
+Commands on bags: simulate, replay, view (rerun), play and record (live, ROS).
+
+Heavy modules (rclpy, rerun) are imported by the command that needs them only.
+"""
+
+import argparse
+import sys
+
+from cvc_balance.cli.arguments import finite, tolerance
+from cvc_balance.physics.model_choice import Tolerance
+
+
+def register(commands):
+    """Add simulate, replay, view, play and record."""
+    simulate = commands.add_parser('simulate', help='make an input bag from a scenario',
+                                   description='Write a bag of /layout and /joint_states '
+                                   'from a scenario file (speed profile, noise, layout changes).')
+    simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
+    simulate.add_argument('-o', '--output', required=True, metavar='BAG', help='bag to write')
+    simulate.set_defaults(run=_simulate)
+
+    replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
+                                 description='Read a bag\'s motion and layouts, compute every '
+                                 'output with the vectorised engine, write them as a bag and '
+                                 'print a summary. No ROS graph needed.')
+    replay.add_argument('bag', metavar='BAG', help='input bag (.mcap)')
+    replay.add_argument('-o', '--output', metavar='OUT', help='bag of outputs to write')
+    replay.add_argument('--layout', metavar='FILE', help='use this layout for the whole run '
+                        '("what if") instead of the bag\'s')
+    replay.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
+    replay.add_argument('--alpha-time-constant', type=finite, default=0.1, metavar='S',
+                        help='as the node\'s parameter (s)')
+    replay.add_argument('--max-speed', type=finite, default=1000.0, metavar='W',
+                        help='as the node\'s parameter (rad/s)')
+    replay.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
+    replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
+                        help='progress bar (default: on a terminal)')
+    replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
+    replay.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
+                        help='largest change accepted in the forces (N), moments (N m) and '
+                        'drive torque (N m), inf for an output not asked: each layout takes '
+                        "the smallest model within it over its samples' speeds and "
+                        'accelerations, and the summary says which')
+    replay.set_defaults(run=_replay)
+
+    view = commands.add_parser('view', help='log every sample of a bag to a rerun .rrd',
+                               description='Compute a bag\'s run (as replay does) and log it '
+                               'for the rerun viewer: the turning gantry, loads, unbalance.')
+    view.add_argument('bag', metavar='BAG')
+    view.add_argument('-o', '--output', required=True, metavar='RUN.rrd')
+    view.add_argument('--every', type=int, default=10, metavar='N',
+                      help='draw load arrows for every N-th sample (plots get all)')
+    view.add_argument('--joint-name', default='gantry_joint')
+    view.set_defaults(run=_view)
+
+    play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
+                               description='Publish the bag\'s layout and motion messages with '
+                               'their timing (to drive a running balance_monitor) and record '
+                               'the node\'s outputs.')
+    play.add_argument('bag', metavar='BAG')
+    play.add_argument('--rate', type=finite, default=1.0, metavar='X',
+                      help='playback speed factor (default 1)')
+    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs to this bag')
+    play.set_defaults(run=_play)
+
+    record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
+                                 description='Record the run\'s inputs and outputs (raw CDR) '
+                                 'to a rosbag2 MCAP file; SIGINT or SIGTERM finalises it.')
+    record.add_argument('-o', '--output', required=True, metavar='BAG')
+    record.add_argument('topics', nargs='*', metavar='TOPIC',
+                        help='topics (patterns with *); default: inputs, outputs, diagnostics')
+    record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
+    record.add_argument('--chunk-kib', type=int, default=1024, metavar='K',
+                        help='chunk size; a killed recorder loses at most one chunk')
+    record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
+                        help='print "ready" once this topic\'s publisher is matched')
+    record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
+                        help='ROS arguments (remapping, namespace)')
+    record.set_defaults(run=_record)
+
+
+def _simulate(args):
+    from cvc_balance.bag.scenario import load_scenario, write_bag
+    scenario = load_scenario(args.scenario)
+    count = write_bag(scenario, args.output)
+    print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
+          f'{len(scenario.layouts)} layouts')
+    return 0
+
+
+def _replay(args):
+    from cvc_balance.bag.replay import format_summary, replay
+    show = args.progress if args.progress is not None else sys.stderr.isatty()
+    logger = _rerun_logger(args.rrd, args.bag) if args.rrd else None
+    summary = replay(args.bag, args.output, args.layout, args.joint_name,
+                     args.alpha_time_constant, args.max_speed,
+                     '' if args.compression == 'none' else args.compression,
+                     ReplayProgress() if show else None, observer=logger,
+                     tolerance=Tolerance(*args.tolerance) if args.tolerance else None)
+    if logger:
+        logger.finish()
+    print(format_summary(summary))
+    return 0
+
+
+class ReplayProgress:
+    """A progress bar (tqdm: rate and time left) fed replay's (done, total) callback."""
+
+    def __init__(self):
+        """Make the bar on the first callback, when the total is known."""
+        self._bar = None
+
+    def __call__(self, done, total):
+        """Show ``done`` of ``total`` samples; close the bar when all are done."""
+        from tqdm import tqdm
+        if self._bar is None:
+            self._bar = tqdm(total=total, desc='replay', unit='samples', unit_scale=True,
+                             file=sys.stderr, leave=False)
+        self._bar.update(done - self._bar.n)
+        if done >= total:
+            self._bar.close()
+
+
+def _rerun_logger(path, bag, every=10):
+    from cvc_balance.view.rerun_log import open_recording, RunLogger
+    return RunLogger(open_recording('save', path, name=bag), every)
+
+
+def _view(args):
+    from cvc_balance.bag.replay import replay
+    logger = _rerun_logger(args.output, args.bag, args.every)
+    summary = replay(args.bag, joint_name=args.joint_name, observer=logger)
+    logger.finish()
+    print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
+          f'{len(summary.segments)} layouts')
+    for problem in summary.problems:
+        print(f'  problem: {problem}')
+    return 0
+
+
+def _play(args):
+    from cvc_balance.ros.player import play_main
+    return play_main(args)
+
+
+def _record(args):
+    from cvc_balance.ros.recorder import record_main
+    return record_main(args)

@@ -1,0 +1,6 @@
+"""
+The rerun view of a run (an adapter; the only part that imports rerun).
+
+:mod:`~cvc_balance.view.rerun_log`: ``RunLogger`` (one logger for the live node and
+for bags) and ``open_recording``; imported on use (rerun is heavy to import).
+"""
