@@ -11,8 +11,8 @@ import argparse
 import importlib
 import sys
 
-from cvc_balance.cli.arguments import EXIT_BAD_INPUT
-from cvc_balance.physics.layout import LayoutError
+from cvc_balance.cli.arguments import EXIT_BAD_INPUT, EXIT_FAILURE
+from cvc_balance.physics.layout import LayoutError, short
 
 COMMAND_MODULES = ('solve', 'bags', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
@@ -24,8 +24,15 @@ def main(argv=None):
     try:
         return args.run(args)
     except (LayoutError, ValueError, OSError) as error:
-        print(f'cvc-balance: error: {error}', file=sys.stderr)
+        print(f'cvc-balance: error: {short(str(error), 2000)}', file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print('cvc-balance: interrupted', file=sys.stderr)
+        return 130
+    except Exception as error:  # a bug, not the input's fault: one line, never a traceback
+        print(f'cvc-balance: internal error: {type(error).__name__}: {short(str(error), 300)} '
+              '(please report it with the command that gave it)', file=sys.stderr)
+        return EXIT_FAILURE
 
 
 def parser():

@@ -1,8 +1,13 @@
 """Argument types and exit codes shared by the commands."""
 
 import argparse
+import json
 import math
 
+from cvc_balance.physics.layout import MAX_MAGNITUDE
+
+EXIT_FAILURE = 1
+"""Exit code of a command that failed for another reason than its input (a bug)."""
 EXIT_BAD_INPUT = 2
 """Exit code of a command given bad input (one line on stderr says what)."""
 
@@ -16,10 +21,31 @@ def number(text):
 
 
 def finite(text):
-    """Parse a finite float (argparse type)."""
+    """Parse a finite float within +-MAX_MAGNITUDE, as layouts' numbers (argparse type)."""
     value = number(text)
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f'must be finite, got {text!r}')
+    if abs(value) > MAX_MAGNITUDE:
+        raise argparse.ArgumentTypeError(f'must be within +-{MAX_MAGNITUDE:g}, got {text!r}')
+    return value
+
+
+def positive(text):
+    """Parse a finite float > 0 (argparse type)."""
+    value = finite(text)
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text!r}')
+    return value
+
+
+def count(text):
+    """Parse an integer >= 1 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a whole number: {text!r}') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be >= 1, got {text!r}')
     return value
 
 
@@ -29,3 +55,13 @@ def tolerance(text):
     if not value >= 0.0:
         raise argparse.ArgumentTypeError(f'must be >= 0 (or inf), got {text!r}')
     return value
+
+
+def print_json(data):
+    """
+    Print ``data`` as strict JSON (RFC 8259: no NaN or Infinity).
+
+    A non-finite number is a bug upstream; it raises ValueError rather than printing
+    something a JSON reader refuses.
+    """
+    print(json.dumps(data, indent=2, allow_nan=False))

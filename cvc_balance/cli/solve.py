@@ -4,10 +4,9 @@
 A table for people or, with ``--json``, one object for programs.
 """
 
-import json
 import math
 
-from cvc_balance.cli.arguments import finite, tolerance
+from cvc_balance.cli.arguments import finite, print_json, tolerance
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees, radians, ROTOR_FRAME, STATOR_FRAME
@@ -57,7 +56,7 @@ def run(args):
     summary = solve_summary(model, result, assessment, args.omega, args.alpha, q, gravity)
     summary['model'] = model_name
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
     else:
         print(format_table(summary))
         print(model_line)
@@ -152,10 +151,12 @@ def format_table(s):
         lines.append(f"{'plane':6}{'z [m]':>8}{'U [g mm]':>11}{'angle':>9}{'allowed':>10}"
                      '   correction mass')
         for label, p in zip(('I', 'II'), balance['planes']):
-            grams = p['correction_mass_kg'] * 1e3
+            correction = 'none: give balancing.correction_radius' \
+                if p['correction_mass_kg'] is None else (
+                    f"{p['correction_mass_kg'] * 1e3:.1f} g at r {p['correction_radius']:.3f} m, "
+                    f"{p['correction_angle_deg']:.2f} deg")
             lines.append(f"{label:6}{p['z']:8.3f}{p['g_mm']:11.1f}{p['angle_deg']:9.2f}"
-                         f"{p['permissible_g_mm']:10.1f}   {grams:.1f} g at r "
-                         f"{p['correction_radius']:.3f} m, {p['correction_angle_deg']:.2f} deg")
+                         f"{p['permissible_g_mm']:10.1f}   {correction}")
     finest = balance['finest_grade_met']
     verdict = 'WITHIN' if balance['within_grade'] else 'OUT OF'
     lines.append(f"achieved: G {balance['equivalent_grade']:.3g} mm/s (finest standard grade met: "

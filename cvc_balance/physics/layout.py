@@ -14,6 +14,7 @@ from functools import cached_property
 import hashlib
 import json
 import math
+import re
 
 import numpy as np
 
@@ -31,6 +32,16 @@ AXES = ('radial', 'tangential', 'axial')
 INERTIA_FIELDS = ('ixx', 'iyy', 'izz', 'ixy', 'ixz', 'iyz')
 DEFAULT_GRADE = 6.3
 """ISO 21940-11 grade (mm/s) when a layout names none: general machinery."""
+MAX_COMPONENTS = 2_000_000
+"""Most components a layout may have (aggregating 10^6 is the tested extreme)."""
+MAX_MAGNITUDE = 1e12
+"""Largest magnitude of any number (kg, m, kg m^2, m/s^2, rad/s, mm/s): products stay finite."""
+MAX_ANGLE = 1e9
+"""Largest |angle|, rad: within it the angles' reduction is exact (1e-32, measured to 1e12)."""
+MAX_NAME = 200
+"""Longest name of a layout, component or support, characters."""
+SUPPORT_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
+"""A support's name: a ROS name token, since it names the topic supports/<name>/load."""
 
 
 class LayoutError(ValueError):
@@ -124,7 +135,21 @@ class Layout:
 
     def digest(self):
         """Short SHA-256 of the layout's canonical JSON: same layout, same digest."""
-        text = json.dumps(asdict(self), sort_keys=True, separators=(',', ':'))
+        return self._digest
+
+    @cached_property
+    def _digest(self):
+        # The canonical JSON is that of dataclasses.asdict(self), built without asdict's
+        # deep copies (16 s for 10^6 components, against about 2 s).
+        data = {field: getattr(self, field) for field in
+                ('name', 'gravity', 'description')}
+        data['balancing'] = asdict(self.balancing)
+        data['supports'] = [asdict(s) for s in self.supports]
+        data['components'] = [
+            {'name': c.name, 'mass': c.mass, 'radius': c.radius, 'angle': c.angle, 'z': c.z,
+             'shape': None if c.shape is None else asdict(c.shape), 'inertia': c.inertia}
+            for c in self.components]
+        text = json.dumps(data, sort_keys=True, separators=(',', ':'))
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
     def correction_planes(self):
@@ -136,10 +161,19 @@ class Layout:
         return None
 
     def correction_radius(self):
-        """Radius (m) at which correction masses go."""
+        """
+        Radius (m) at which correction masses go.
+
+        Default: the largest component radius; when every component is centred on the
+        axis, the largest half-extent of their shapes (a drum's rim); 0 when they are all
+        points on the axis (then no correction mass can be given).
+        """
         if self.balancing.correction_radius is not None:
             return self.balancing.correction_radius
-        return max(c.radius for c in self.components)
+        radius = float(self.placement[1].max())
+        if radius > 0.0:
+            return radius
+        return max(c.shape.extent / 2 if c.shape is not None else 0.0 for c in self.components)
 
 
 def parse_layout(data):
@@ -151,11 +185,15 @@ def parse_layout(data):
     _mapping(data, 'layout')
     _known_keys(data, ('name', 'description', 'components', 'supports', 'gravity',
                        'balancing'), 'layout')
-    name = _text(_required(data, 'name', 'layout'), 'layout: field name')
+    name = _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
     components = _list(_required(data, 'components', 'layout'), 'layout: field components')
     if not components:
         raise LayoutError('layout: field components: needs at least one component')
-    parsed = tuple(_component(item, i) for i, item in enumerate(components))
+    if len(components) > MAX_COMPONENTS:
+        raise LayoutError(f'layout: field components: {len(components)} components, over the '
+                          f'limit of {MAX_COMPONENTS}')
+    parsed = tuple(_plain_component(item) or _component(item, i)
+                   for i, item in enumerate(components))
     _unique([c.name for c in parsed], 'component')
     supports = _supports(_required(data, 'supports', 'layout'))
     gravity = DEFAULT_GRAVITY
@@ -164,26 +202,59 @@ def parse_layout(data):
     balancing = _balancing(data.get('balancing', {}))
     description = _text(data.get('description', ''), 'layout: field description',
                         allow_empty=True)
+    if len(description) > 100 * MAX_NAME:
+        raise LayoutError(f'layout: field description: {len(description)} characters, over '
+                          f'the limit of {100 * MAX_NAME}')
     return Layout(name, parsed, supports, gravity, balancing, description)
+
+
+_COMPONENT_FIELDS = ('name', 'mass', 'radius', 'angle', 'angle_deg', 'z', 'shape', 'inertia')
+_PLAIN_FIELDS = frozenset({'name', 'mass', 'radius', 'angle', 'z'})
+_FLOAT = (float, int)
+
+
+def _plain_component(item):
+    """
+    Return the point-mass component ``item`` describes when all is plainly well, else None.
+
+    The common case of a big layout, checked without building a message per field (10^6
+    components); anything unusual or wrong goes to :func:`_component`, which names it.
+    """
+    if type(item) is not dict or not item.keys() <= _PLAIN_FIELDS or len(item) < 4:
+        return None
+    name, mass, radius = item.get('name'), item.get('mass'), item.get('radius')
+    angle, z = item.get('angle'), item.get('z', 0.0)
+    if not (type(name) is str and 0 < len(name) <= MAX_NAME and name.isprintable()
+            and type(mass) in _FLOAT and type(radius) in _FLOAT and type(angle) in _FLOAT
+            and type(z) in _FLOAT):
+        return None
+    try:
+        mass, radius, angle, z = float(mass), float(radius), float(angle), float(z)
+    except OverflowError:                  # an integer of hundreds of digits
+        return None
+    if not (0.0 < mass <= MAX_MAGNITUDE and 0.0 <= radius <= MAX_MAGNITUDE
+            and -MAX_ANGLE <= angle <= MAX_ANGLE and -MAX_MAGNITUDE <= z <= MAX_MAGNITUDE):
+        return None
+    return Component(name, mass, radius, angle, z)
 
 
 def _component(item, index):
     where = f'component #{index + 1}'
     _mapping(item, where)
     if isinstance(item.get('name'), str) and item['name']:
-        where = f"component '{item['name']}'"
-    _known_keys(item, ('name', 'mass', 'radius', 'angle', 'angle_deg', 'z', 'shape',
-                       'inertia'), where)
-    name = _text(_required(item, 'name', where), f'{where}: field name')
+        where = f"component {short(item['name'])}"
+    _known_keys(item, _COMPONENT_FIELDS, where)
+    name = _text(_required(item, 'name', where), f'{where}: field name', limit=MAX_NAME)
     mass = _number(_required(item, 'mass', where), f'{where}: field mass', minimum=0.0,
                    strict=True)
     radius = _number(_required(item, 'radius', where), f'{where}: field radius', minimum=0.0)
     if ('angle' in item) == ('angle_deg' in item):
         raise LayoutError(f'{where}: give exactly one of fields angle (rad) and angle_deg')
     if 'angle' in item:
-        angle = _number(item['angle'], f'{where}: field angle')
+        angle = _number(item['angle'], f'{where}: field angle', bound=MAX_ANGLE)
     else:
-        angle = radians(_number(item['angle_deg'], f'{where}: field angle_deg'))
+        angle = radians(_number(item['angle_deg'], f'{where}: field angle_deg',
+                                bound=math.degrees(MAX_ANGLE)))
     z = _number(item.get('z', 0.0), f'{where}: field z')
     if 'shape' in item and 'inertia' in item:
         raise LayoutError(f'{where}: give field shape or field inertia, not both')
@@ -195,8 +266,8 @@ def _component(item, index):
 def _shape(spec, where):
     _mapping(spec, f'{where}: field shape')
     kind = spec.get('type')
-    if kind not in SHAPE_FIELDS:
-        raise LayoutError(f'{where}: field shape.type: unknown shape {kind!r}, '
+    if not isinstance(kind, str) or kind not in SHAPE_FIELDS:
+        raise LayoutError(f'{where}: field shape.type: unknown shape {short(kind)}, '
                           f'expected one of {", ".join(SHAPE_FIELDS)}')
     allowed = ('type',) + SHAPE_FIELDS[kind] + (('axis',) if kind in AXIAL_SHAPES else ())
     _known_keys(spec, allowed, f'{where}: field shape ({kind})')
@@ -211,8 +282,8 @@ def _shape(spec, where):
                                   minimum=0.0, strict=True)
     if kind == 'tube' and not values['inner_radius'] < values['outer_radius']:
         raise LayoutError(f'{where}: field shape.inner_radius must be less than outer_radius')
-    if 'axis' in spec and spec['axis'] not in AXES:
-        raise LayoutError(f'{where}: field shape.axis: unknown axis {spec["axis"]!r}, '
+    if 'axis' in spec and (not isinstance(spec['axis'], str) or spec['axis'] not in AXES):
+        raise LayoutError(f'{where}: field shape.axis: unknown axis {short(spec["axis"])}, '
                           f'expected one of {", ".join(AXES)}')
     return Shape(kind, axis=spec.get('axis', 'axial'), **values)
 
@@ -246,13 +317,17 @@ def _supports(value):
         where = f'support #{i + 1}'
         _mapping(item, where)
         if isinstance(item.get('name'), str) and item['name']:
-            where = f"support '{item['name']}'"
+            where = f"support {short(item['name'])}"
         _known_keys(item, ('name', 'z', 'axial'), where)
-        name = _text(_required(item, 'name', where), f'{where}: field name')
+        name = _text(_required(item, 'name', where), f'{where}: field name', limit=MAX_NAME)
+        if not SUPPORT_NAME.fullmatch(name):
+            raise LayoutError(f'{where}: field name must be a ROS name token (letters, digits '
+                              'and _, not starting with a digit): it names the topic '
+                              'supports/<name>/load')
         z = _number(_required(item, 'z', where), f'{where}: field z')
         axial = item.get('axial', False)
         if not isinstance(axial, bool):
-            raise LayoutError(f'{where}: field axial must be true or false, got {axial!r}')
+            raise LayoutError(f'{where}: field axial must be true or false, got {short(axial)}')
         supports.append(Support(name, z, axial))
     _unique([s.name for s in supports], 'support')
     if len(supports) == 2:
@@ -307,30 +382,37 @@ def _list(value, where):
 def _known_keys(mapping, allowed, where):
     for key in mapping:
         if key not in allowed:
-            raise LayoutError(f'{where}: unknown field {key!r} (known: {", ".join(allowed)})')
+            raise LayoutError(f'{where}: unknown field {short(key)} (known: {", ".join(allowed)})')
 
 
-def _text(value, where, allow_empty=False):
+def _text(value, where, allow_empty=False, limit=None):
     if not isinstance(value, str) or (not value and not allow_empty):
-        raise LayoutError(f'{where} must be a non-empty string, got {value!r}')
+        raise LayoutError(f'{where} must be a non-empty string, got {short(value)}')
+    if limit is not None and (len(value) > limit or not value.isprintable()):
+        raise LayoutError(f'{where} must be one line of at most {limit} printable characters, '
+                          f'got {short(value)}')
     return value
 
 
-def _number(value, where, minimum=None, strict=False):
+def _number(value, where, minimum=None, strict=False, bound=MAX_MAGNITUDE):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise LayoutError(f'{where} must be a number, got {_kind(value)} {value!r}')
+        raise LayoutError(f'{where} must be a number, got {short(value)}')
+    if isinstance(value, int) and abs(value) > bound:     # before float(): 10^400 overflows
+        raise LayoutError(f'{where} must be within +-{bound:g}, got {short(value)}')
     value = float(value)
     if not math.isfinite(value):
         raise LayoutError(f'{where} must be finite, got {value}')
+    if abs(value) > bound:
+        raise LayoutError(f'{where} must be within +-{bound:g}, got {value:g}')
     if minimum is not None and (value < minimum or (strict and value == minimum)):
-        bound = '>' if strict else '>='
-        raise LayoutError(f'{where} must be {bound} {minimum:g}, got {value:g}')
+        sign = '>' if strict else '>='
+        raise LayoutError(f'{where} must be {sign} {minimum:g}, got {value:g}')
     return value
 
 
 def _vector(value, length, where, minimum=None):
     if not isinstance(value, list) or len(value) != length:
-        raise LayoutError(f'{where} must be a list of {length} numbers, got {value!r}')
+        raise LayoutError(f'{where} must be a list of {length} numbers, got {short(value)}')
     strict = minimum is not None
     return tuple(_number(v, f'{where}[{i}]', minimum, strict) for i, v in enumerate(value))
 
@@ -345,3 +427,19 @@ def _unique(names, what):
 
 def _kind(value):
     return type(value).__name__
+
+
+def short(value, limit=40):
+    """
+    Return ``value`` for an error message: one line, at most about ``limit`` characters.
+
+    Containers are described, not printed (a bad value may be megabytes).
+    """
+    if isinstance(value, (dict, list, tuple, set)):
+        return f'a {_kind(value)} of {len(value)} items'
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return f'an integer of about {int(value.bit_length() * 0.30103) + 1} digits'
+    if isinstance(value, str) and len(value) > limit:
+        return repr(value[:limit]) + f'... ({len(value)} characters)'
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + '...'

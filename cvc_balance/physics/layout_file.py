@@ -1,10 +1,74 @@
-"""Read a layout from a YAML or JSON file or text (the layout topic's payload)."""
+"""
+Read a layout from a YAML or JSON file or text (the layout topic's payload), safely.
+
+Text from anyone (a file, a latched topic) goes through limits before it costs anything:
+its size, its nesting depth, YAML aliases (an alias "bomb" of a few hundred bytes expands
+to hundreds of millions of nodes), duplicate keys (YAML and JSON would silently take the
+last). Whatever goes wrong, the caller gets one :class:`LayoutError` naming it, never
+another exception type.
+"""
 
 import json
 
 import yaml
 
-from cvc_balance.physics.layout import LayoutError, parse_layout
+from cvc_balance.physics.layout import LayoutError, parse_layout, short
+
+MAX_TEXT_BYTES = 256 * 2**20
+"""Largest layout text, bytes (10^6 components as JSON take about 90 MB)."""
+ALIAS_EXPANSION = 4
+"""YAML aliases may at most multiply a document's nodes by this (plus ALIAS_ALLOWANCE)."""
+ALIAS_ALLOWANCE = 10_000
+
+try:    # libyaml's parser (C, events): fast, and it keeps its own stack, so it is safe
+    from yaml._yaml import CParser as _Parser
+except ImportError:                                  # pragma: no cover
+    from yaml.parser import Parser as _Parser
+
+    class _Stream(yaml.reader.Reader, yaml.scanner.Scanner, _Parser):
+        pass
+    _Parser = _Stream
+
+
+class _LayoutLoader(yaml.composer.Composer, _Parser, yaml.constructor.SafeConstructor,
+                    yaml.resolver.Resolver):
+    """
+    PyYAML's safe loading, with Python's composer, that refuses duplicate keys.
+
+    The composer is PyYAML's Python one even over libyaml's parser: libyaml's own
+    (Cython) composer recurses in C per level of nesting, so 10^5 nested lists crash the
+    process; the Python one raises RecursionError, which becomes a LayoutError.
+    """
+
+    def __init__(self, stream):
+        """Read ``stream`` (text)."""
+        _Parser.__init__(self, stream)
+        yaml.constructor.SafeConstructor.__init__(self)
+        yaml.resolver.Resolver.__init__(self)
+        yaml.composer.Composer.__init__(self)
+
+    def construct_mapping(self, node, deep=False):
+        """Construct a mapping; a key given twice is an error (YAML says keys are unique)."""
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                if key_node.tag == 'tag:yaml.org,2002:merge':
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                except TypeError:
+                    raise LayoutError(f'line {key_node.start_mark.line + 1}: a key must be a '
+                                      f'number or text, got {short(key)}') from None
+                if duplicate:
+                    raise LayoutError(f'line {key_node.start_mark.line + 1}: key {short(key)} '
+                                      'given twice')
+                seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+_LayoutLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                              _LayoutLoader.construct_mapping)
 
 
 def layout_from_text(text, source='layout'):
@@ -13,28 +77,104 @@ def layout_from_text(text, source='layout'):
 
     JSON (which YAML mostly contains) is tried first so that JSON's NaN and
     Infinity are read as numbers and then rejected by the validation.
-    Raises :class:`LayoutError` with one line naming the problem.
+    Raises :class:`LayoutError` with one line naming the problem, whatever it is.
     """
-    try:
-        data = json.loads(text)
-    except ValueError:
+    if isinstance(text, (bytes, bytearray)):
         try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as error:
-            mark = getattr(error, 'problem_mark', None)
-            where = f' line {mark.line + 1}' if mark is not None else ''
-            problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
-            raise LayoutError(f'{source}:{where}: not valid YAML or JSON: {problem}') from None
-    return parse_layout(data)
+            text = text.decode('utf-8')
+        except UnicodeDecodeError:
+            raise LayoutError(f'{source}: layout is not UTF-8 text') from None
+    if not isinstance(text, str):
+        raise LayoutError(f'{source}: layout must be text, got {type(text).__name__}')
+    if len(text) > MAX_TEXT_BYTES:
+        raise LayoutError(f'{source}: layout text of {len(text)} bytes is over the limit of '
+                          f'{MAX_TEXT_BYTES} bytes')
+    try:
+        return parse_layout(_parse(text, source))
+    except LayoutError as error:
+        message = str(error)
+        raise LayoutError(message if message.startswith(source) else f'{source}: {message}') \
+            from None
+    except RecursionError:      # the JSON and YAML parsers recurse per level of nesting
+        raise LayoutError(f'{source}: nested too deeply (a layout needs 5 levels)') from None
+    except MemoryError:
+        raise LayoutError(f'{source}: layout too large for memory') from None
+
+
+def _parse(text, source):
+    try:
+        return json.loads(text, object_pairs_hook=_json_object)
+    except json.JSONDecodeError:
+        pass                    # not JSON: YAML then
+    loader = _LayoutLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_aliases(node, source)
+        return loader.construct_document(node)
+    except yaml.YAMLError as error:
+        mark = getattr(error, 'problem_mark', None)
+        where = f' line {mark.line + 1}' if mark is not None else ''
+        problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
+        raise LayoutError(f'{source}:{where}: not valid YAML or JSON: {short(problem, 80)}') \
+            from None
+    except (ValueError, TypeError, IndexError, OverflowError) as error:
+        # PyYAML's constructors fail like this on e.g. `!!int ` or `!!float heavy`.
+        raise LayoutError(f'{source}: not valid YAML: {type(error).__name__}: '
+                          f'{short(str(error), 80)}') from None
+    finally:
+        loader.dispose()
+
+
+def _json_object(pairs):
+    mapping = {}
+    for key, value in pairs:
+        if key in mapping:
+            raise LayoutError(f'key {short(key)} given twice')
+        mapping[key] = value
+    return mapping
+
+
+def _check_aliases(root, source):
+    """Refuse a YAML document whose aliases expand it beyond ALIAS_EXPANSION times."""
+    literal, stack, sizes, seen = 0, [(root, False)], {}, set()
+    while stack:           # iterative post-order: sizes of shared (aliased) nodes once
+        node, children_done = stack.pop()
+        key = id(node)
+        if children_done:
+            children = _children(node)
+            sizes[key] = 1 + sum(sizes[id(child)] for child in children)
+            continue
+        if key in seen:
+            continue
+        seen.add(key)
+        literal += 1
+        stack.append((node, True))
+        stack.extend((child, False) for child in _children(node) if id(child) not in seen)
+    expanded = sizes[id(root)]
+    if expanded > ALIAS_EXPANSION * literal + ALIAS_ALLOWANCE:
+        raise LayoutError(f'{source}: YAML aliases expand {literal} nodes to {expanded}: '
+                          f'refused (at most {ALIAS_EXPANSION}x)')
+
+
+def _children(node):
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
 
 
 def load_layout(path):
     """Read and validate the layout file at ``path``."""
     try:
-        with open(path, encoding='utf-8') as stream:
-            text = stream.read()
+        with open(path, 'rb') as stream:
+            data = stream.read(MAX_TEXT_BYTES + 1)
     except OSError as error:
         raise LayoutError(f'{path}: cannot read layout file: {error.strerror}') from None
+    try:
+        text = data.decode('utf-8')
     except UnicodeDecodeError:
         raise LayoutError(f'{path}: layout file is not UTF-8 text') from None
     return layout_from_text(text, source=str(path))

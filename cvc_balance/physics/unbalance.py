@@ -30,7 +30,8 @@ class PlaneUnbalance:
     Unbalance in one correction plane and the mass that cancels it.
 
     ``amount`` kg m at ``angle`` rad (rotor frame); ``correction_mass`` kg at
-    ``correction_radius`` m and ``correction_angle`` rad, in the plane at ``z`` m.
+    ``correction_radius`` m and ``correction_angle`` rad, in the plane at ``z`` m
+    (None when the correction radius is 0: every component a point on the axis).
     """
 
     z: float
@@ -83,8 +84,9 @@ def plane_unbalances(model, z_i, z_ii, correction_radius):
     for z, (u_x, u_y) in ((z_i, ((z_ii * s_x - p_xz) / span, (z_ii * s_y - p_yz) / span)),
                           (z_ii, ((p_xz - z_i * s_x) / span, (p_yz - z_i * s_y) / span))):
         amount, angle = polar(u_x, u_y)
-        planes.append(PlaneUnbalance(z, amount, angle, amount / correction_radius,
-                                     correction_radius, _opposite(angle)))
+        mass = amount / correction_radius if correction_radius > 0.0 else None
+        planes.append(PlaneUnbalance(z, amount, angle, mass, correction_radius,
+                                     _opposite(angle)))
     return tuple(planes)
 
 
