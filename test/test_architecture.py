@@ -18,6 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'cvc_balance'
 
 LAYERS = {
     'physics': 0,      # numpy only: layouts, engine, unbalance, ISO 21940, motion
+    'identify': 1,     # the unbalance from measured support loads (numpy)
     'messages': 1,     # topic names and types, CDR, ros2msg schemas (no rclpy)
     'bag': 2,          # MCAP reading and writing, replay, scenarios (no rclpy)
     'view': 2,         # rerun
@@ -29,6 +30,7 @@ LAYERS = {
 THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
     'physics': {'numpy', 'yaml'},
+    'identify': {'numpy'},
     'messages': {'ament_index_python'},
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
     'view': {'numpy', 'rerun'},

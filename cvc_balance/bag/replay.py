@@ -97,6 +97,32 @@ def read_inputs(bag, joint_name):
     return motion, layouts
 
 
+def layout_events(bag, layout_messages, layout_file=None):
+    """
+    Return ([(log time ns, Layout)], problems): the layouts in force, from their log times.
+
+    ``layout_file`` (what if) replaces the bag's layouts for the whole run. A layout
+    message that does not parse is reported and the previous one stays in force. Raises
+    BagError when no layout is usable.
+    """
+    problems = []
+    if layout_file is not None:
+        from cvc_balance.physics.layout_file import load_layout
+        events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
+    else:
+        events = []
+        for log_time, text in layout_messages:
+            try:
+                events.append((log_time, layout_from_text(text, source='layout message')))
+            except LayoutError as error:
+                problems.append(f'layout at {log_time * 1e-9:.3f} s rejected '
+                                f'(previous stays in force): {error}')
+    if not events:
+        raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
+                       'give one with --layout')
+    return events, problems
+
+
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
            time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
            observer=None, tolerance=None):
@@ -115,20 +141,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     motion, layout_messages = read_inputs(bag, joint_name)
     summary.samples = len(motion.stamp) + motion.rejected
     summary.reasons = list(motion.reasons)
-    if layout_file is not None:
-        from cvc_balance.physics.layout_file import load_layout
-        events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
-    else:
-        events = []
-        for log_time, text in layout_messages:
-            try:
-                events.append((log_time, layout_from_text(text, source='layout message')))
-            except LayoutError as error:
-                summary.problems.append(f'layout at {log_time * 1e-9:.3f} s rejected '
-                                        f'(previous stays in force): {error}')
-    if not events:
-        raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
-                       'give one with --layout')
+    events, summary.problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
     accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
     summary.rejected = motion.rejected + int((~accepted).sum())

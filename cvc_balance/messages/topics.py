@@ -12,6 +12,8 @@ BEARING_LOAD = 'bearing_load'
 UNBALANCE = 'unbalance'
 DRIVE_TORQUE = 'drive_torque'
 DIAGNOSTICS = '/diagnostics'
+IDENTIFIED_UNBALANCE = 'identified_unbalance'
+UNBALANCE_RESIDUAL = 'unbalance_residual'
 
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 FLOAT64_TYPE = 'std_msgs/msg/Float64'
@@ -26,3 +28,8 @@ OUTPUTS = (BEARING_LOAD, UNBALANCE, DRIVE_TORQUE)
 def support_load(name):
     """Return the topic of a support's load."""
     return f'supports/{name}/load'
+
+
+def measured_load(name):
+    """Return the topic of a support's load cell (WrenchStamped, stator frame, N)."""
+    return f'supports/{name}/measured_load'

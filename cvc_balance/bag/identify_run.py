@@ -1,0 +1,99 @@
+"""
+``identify`` of a recorded run: per layout segment, the rotor's unbalance from its load cells.
+
+Reads the motion and the layouts as replay does (:func:`cvc_balance.bag.replay.read_inputs`,
+the node's input checks and alpha estimate), each support's cell
+(``supports/<name>/measured_load``, WrenchStamped, stator frame), and fits each layout's
+segment (:mod:`cvc_balance.identify`): the identified unbalance, the layout's, the
+residual (what the layout does not know), their 95 % radii and the fit's rms.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from cvc_balance.bag.mcap_reader import Bag, wrench_samples
+from cvc_balance.bag.replay import layout_events, read_inputs
+from cvc_balance.identify import (CellReadings, fit, identified_unbalance, layout_unbalance,
+                                  Motion, residual)
+from cvc_balance.messages import topics
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.motion import acceleration_series, accepted_samples
+
+
+@dataclass
+class IdentifiedSegment:
+    """One layout's samples and what the fit found (SI; see :mod:`cvc_balance.identify`)."""
+
+    layout: object
+    start_ns: int
+    end_ns: int
+    samples: int
+    readings: int
+    dropped: int
+    revolutions: float
+    estimate: object
+    identified: object
+    declared: object
+    residual: object
+
+
+def cell_readings(bag, supports):
+    """Return {support name: CellReadings} of the bag's load cells for these supports."""
+    cells = {}
+    for support in supports:
+        channel = bag.channel(topics.measured_load(support.name), topics.WRENCH_TYPE)
+        if channel is None:
+            continue
+        stamp, force, torque = wrench_samples(bag, channel)
+        cells[support.name] = CellReadings(support.name, stamp * 1e-9, force, torque)
+    return cells
+
+
+def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_revs=None,
+                 time_constant=0.1, max_speed=1000.0):
+    """
+    Identify each layout segment of ``bag_path``; return ([IdentifiedSegment], problems).
+
+    ``window_revs``: fit only the last that many revolutions of each segment (the state
+    at its end, as the live node reports it); default the whole segment.
+    """
+    bag = Bag(bag_path)
+    motion, layout_messages = read_inputs(bag, joint_name)
+    events, problems = layout_events(bag, layout_messages, layout_file)
+    t = motion.stamp * 1e-9
+    accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
+    t, angle, omega = t[accepted], motion.angle[accepted], motion.omega[accepted]
+    alpha = acceleration_series(t, omega, time_constant)
+    log_time = motion.log_time[accepted]
+    segments = []
+    bounds = [e[0] for e in events[1:]] + [np.iinfo(np.int64).max]
+    for (start_ns, layout), end_ns in zip(events, bounds):
+        lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
+        model = RotorModel.from_layout(layout)
+        if hi - lo < 2:
+            continue
+        part = slice(lo, hi)
+        seg = Motion(t[part], angle[part], omega[part], alpha[part])
+        if window_revs is not None:
+            turned = np.abs(np.unwrap(seg.angle) - np.unwrap(seg.angle)[-1]) / (2 * math.pi)
+            keep = turned <= window_revs
+            seg = Motion(seg.time[keep], seg.angle[keep], seg.omega[keep], seg.alpha[keep])
+        cells = {name: _during(c, seg.time[0], seg.time[-1])
+                 for name, c in cell_readings(bag, model.supports).items()}
+        estimate, dropped = fit(model, seg, cells)
+        identified = identified_unbalance(model, estimate)
+        declared = layout_unbalance(model)
+        segments.append(IdentifiedSegment(
+            layout, int(max(start_ns, 0)), int(min(end_ns, log_time[hi - 1])), int(hi - lo),
+            int(estimate.readings), int(dropped), seg.revolutions(), estimate, identified,
+            declared,
+            residual(identified, declared)))
+    return segments, bag.problems + problems
+
+
+def _during(cell, start, end):
+    inside = (cell.time >= start) & (cell.time <= end)
+    return CellReadings(cell.support, cell.time[inside], cell.force[inside],
+                        cell.torque[inside])

@@ -1,0 +1,105 @@
+"""
+``cvc-balance identify BAG``: the real rotor's unbalance from its load cells, per layout.
+
+For each layout segment of a recorded run: the unbalance identified from the cells, the
+layout's, the residual (what the layout does not know) with 95 % radii, and the fit's rms;
+a table for people or, with ``--json``, one object (README "Monitor the real rotor").
+"""
+
+import math
+
+from cvc_balance.cli.arguments import count, print_json
+from cvc_balance.physics.frames import degrees
+
+
+def register(commands):
+    """Add the identify command."""
+    identify = commands.add_parser(
+        'identify', help="the real rotor's unbalance from its load cells",
+        description='Fit the static, couple and per-plane unbalance of each layout segment '
+        'of a bag to its load-cell readings (supports/<name>/measured_load), and compare it '
+        'with what the layout declares.')
+    identify.add_argument('bag', metavar='BAG', help='recorded run (.mcap)')
+    identify.add_argument('--layout', metavar='FILE',
+                          help="the declared layout for the whole run instead of the bag's")
+    identify.add_argument('--window-revs', type=count, metavar='N',
+                          help='fit only the last N revolutions of each segment (default: all)')
+    identify.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
+    identify.add_argument('--json', action='store_true', help='print one JSON object')
+    identify.set_defaults(run=run)
+
+
+def run(args):
+    """Run ``cvc-balance identify``."""
+    from cvc_balance.bag.identify_run import identify_bag
+    segments, problems = identify_bag(args.bag, args.layout, args.joint_name, args.window_revs)
+    summary = {'bag': str(args.bag), 'problems': problems,
+               'segments': [segment_summary(s) for s in segments]}
+    if args.json:
+        print_json(summary)
+    else:
+        print(format_table(summary))
+    return 0
+
+
+def _vector(vector, unit_scale, unit):
+    ci = vector.ci95 * unit_scale if math.isfinite(vector.ci95) else None
+    return {unit: vector.amount * unit_scale, 'angle_deg': degrees(vector.angle),
+            f'ci95_{unit}': ci}
+
+
+def unbalance_summary(unbalance):
+    """Return a RotorUnbalance as JSON-able data: kg m, kg m^2, g mm; degrees."""
+    return {'static_unbalance': _vector(unbalance.static, 1.0, 'kg_m'),
+            'couple_unbalance': _vector(unbalance.couple, 1.0, 'kg_m2'),
+            'planes': [{'z': z, **_vector(v, 1e6, 'g_mm')} for z, v in unbalance.planes]}
+
+
+def segment_summary(segment):
+    """Return an IdentifiedSegment as JSON-able data (schema in the README)."""
+    estimate = segment.estimate
+    return {
+        'layout': {'name': segment.layout.name, 'digest': segment.layout.digest()},
+        'from': segment.start_ns * 1e-9, 'to': segment.end_ns * 1e-9,
+        'samples': segment.samples, 'readings': segment.readings, 'dropped': segment.dropped,
+        'revolutions': segment.revolutions, 'identifiable': estimate.identifiable,
+        'identified': unbalance_summary(segment.identified),
+        'layout_prediction': unbalance_summary(segment.declared),
+        'residual': unbalance_summary(segment.residual),
+        'fit': {'rms_N': estimate.sigma * math.sqrt(2) if estimate.identifiable else None,
+                'sigma_N': estimate.sigma if estimate.identifiable else None,
+                'biases_N': [[b.real, b.imag] for b in estimate.biases]},
+    }
+
+
+def format_table(summary):
+    """Format the identify summary for people (g mm, degrees)."""
+    lines = [f"bag {summary['bag']}"] + [f'  problem: {p}' for p in summary['problems']]
+    for s in summary['segments']:
+        lines.append(f"layout '{s['layout']['name']}' ({s['layout']['digest']}) "
+                     f"{s['from']:.3f}-{s['to']:.3f} s: {s['samples']} samples, "
+                     f"{s['readings']} cell readings ({s['dropped']} dropped), "
+                     f"{s['revolutions']:.1f} revolutions")
+        if not s['readings']:
+            lines.append('  no load-cell readings (topics supports/<name>/measured_load)')
+            continue
+        if not s['identifiable']:
+            lines.append('  not identifiable: too few readings, revolutions or speed')
+            continue
+        lines.append(f"  fit: rms {s['fit']['rms_N']:.3g} N per reading")
+        lines.append(f"  {'plane':6}{'z [m]':>8}{'identified [g mm]':>26}{'layout [g mm]':>24}"
+                     f"{'residual [g mm]':>26}")
+        for label, got, want, diff in zip(('I', 'II'), s['identified']['planes'],
+                                          s['layout_prediction']['planes'],
+                                          s['residual']['planes']):
+            lines.append(f"  {label:6}{got['z']:8.3f}{_cell(got):>26}{_cell(want, False):>24}"
+                         f"{_cell(diff):>26}")
+        st = s['residual']['static_unbalance']
+        lines.append(f"  static residual {st['kg_m'] * 1e6:.0f} +- {st['ci95_kg_m'] * 1e6:.0f} "
+                     f"g mm at {st['angle_deg']:.1f} deg")
+    return '\n'.join(lines)
+
+
+def _cell(vector, interval=True):
+    text = f"{vector['g_mm']:.0f} at {vector['angle_deg']:.1f}"
+    return text + (f" +-{vector['ci95_g_mm']:.0f}" if interval else '')
