@@ -94,6 +94,54 @@ def sample_problem(time, last_time, angle, omega, max_speed):
     return None
 
 
+class StampGate:
+    """
+    Stamps of a motion stream: in order, and no implausible jump lets one sample poison it.
+
+    A stamp is accepted when it is after the last accepted one by at most ``max_jump``
+    seconds. A late one (reordered in transit) is rejected. One more than ``max_jump`` away
+    (a clock glitch, a sample stamped 2147483647 s, a clock stepped back) is rejected and
+    remembered: if the next stamp follows it plausibly, the stream has really moved to a new
+    time line (a restarted driver, a clock step), which is then followed from that next
+    sample on; otherwise the old time line goes on and the glitch is forgotten. So a single
+    bad stamp costs one sample, not every later one. With ``max_jump`` inf the gate only
+    keeps the order.
+    """
+
+    def __init__(self, max_jump=math.inf):
+        """Start with no stamp; ``max_jump`` s (> 0) is the largest plausible step."""
+        if not max_jump > 0.0:
+            raise ValueError(f'max_jump must be > 0 s, got {max_jump}')
+        self.max_jump = max_jump
+        self.last = None
+        self._candidate = None
+
+    def check(self, time):
+        """
+        Return None and take ``time`` (s) when it is acceptable, else say why not.
+
+        ``restarted`` is True after a call that moved to a new time line (the caller
+        resets what depends on the time line: the alpha estimate).
+        """
+        self.restarted = False
+        if self.last is None or 0.0 < time - self.last <= self.max_jump:
+            self.last, self._candidate = time, None
+            return None
+        # Far from the time line (either way): perhaps a new one, if the next sample agrees.
+        # Slightly late samples (reordered in transit) are only rejected.
+        candidate = self._candidate
+        self._candidate = time if abs(time - self.last) > self.max_jump else None
+        if candidate is not None and 0.0 < time - candidate <= self.max_jump:
+            self.last, self._candidate, self.restarted = time, None, True
+            return None
+        if time <= self.last:
+            return f'stamp {time:.9f} s not after the previous {self.last:.9f} s'
+        return (f'stamp {time:.9f} s jumps {time - self.last:.6g} s past the previous '
+                f'(more than max_stamp_jump {self.max_jump:g} s)')
+
+    restarted = False
+
+
 def acceleration_series(time, omega, time_constant, block=None):
     """
     Compute the :class:`AccelerationEstimator`'s output for whole arrays, vectorised.
@@ -140,17 +188,37 @@ def acceleration_series(time, omega, time_constant, block=None):
     return alpha
 
 
-def accepted_samples(time, angle, omega, max_speed):
+def accepted_samples(time, angle, omega, max_speed, max_jump=math.inf):
     """
     Which samples the live node accepts, vectorised (see :func:`sample_problem`).
 
-    Finite angle and speed, |omega| <= max_speed, and a stamp after every
-    earlier accepted one (= after every earlier valid one: a valid but late
-    sample never raises the maximum). Returns a boolean array.
+    Finite angle and speed, |omega| <= max_speed, and a stamp the node's
+    :class:`StampGate` takes. Returns a boolean array; :func:`gate_samples` also
+    says where the time line restarted.
+    """
+    return gate_samples(time, angle, omega, max_speed, max_jump)[0]
+
+
+def gate_samples(time, angle, omega, max_speed, max_jump=math.inf):
+    """
+    Return (accepted, restarted): boolean arrays over the samples, as the live node decides.
+
+    Without implausible stamps (every valid one after the previous valid one by at most
+    ``max_jump``) this is a few numpy calls; otherwise the valid samples go through a
+    :class:`StampGate` one by one (a damaged stream only).
     """
     import numpy as np
 
+    time = np.asarray(time, float)
     valid = np.isfinite(angle) & np.isfinite(omega) & (np.abs(omega) <= max_speed)
-    latest = np.maximum.accumulate(np.where(valid, time, -np.inf))
-    before = np.concatenate([[-np.inf], latest[:-1]])
-    return valid & (time > before)
+    restarted = np.zeros(len(time), bool)
+    stamps = time[valid]
+    steps = np.diff(stamps)
+    if np.all((steps > 0.0) & (steps <= max_jump)):
+        return valid, restarted
+    accepted = np.zeros(len(time), bool)
+    gate = StampGate(max_jump)
+    for index in np.flatnonzero(valid).tolist():
+        accepted[index] = gate.check(float(time[index])) is None
+        restarted[index] = gate.restarted
+    return accepted, restarted
