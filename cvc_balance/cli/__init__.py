@@ -14,7 +14,7 @@ import sys
 from cvc_balance.cli.arguments import EXIT_BAD_INPUT
 from cvc_balance.physics.layout import LayoutError
 
-COMMAND_MODULES = ('solve', 'bags', 'bench')
+COMMAND_MODULES = ('solve', 'design', 'bags', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
 
 
