@@ -111,7 +111,7 @@ def _layout_argument(parser):
 
 
 def _speed(args, layout):
-    """The speed asked (rad/s), else the layout's service speed, else None."""
+    """Return the speed asked (rad/s), else the layout's service speed, else None."""
     if args.omega is not None:
         if not args.omega > 0.0:
             raise ValueError(f'--omega must be > 0 rad/s, got {args.omega:g}')
@@ -328,8 +328,8 @@ def _tolerance_table(summary, result):
         if not changed:
             lines.append('  nothing to tighten: the given tolerances meet it')
         for t in changed:
-            given, proposed = _shown(t['given'], t['parameter']), _shown(t['proposed'],
-                                                                        t['parameter'])
+            given = _shown(t['given'], t['parameter'])
+            proposed = _shown(t['proposed'], t['parameter'])
             lines.append(f"  {t['component'] + '.' + t['parameter']:34}{given:>14} -> "
                          f"{proposed:>14}  ({t['factor']:.3g} x tighter)")
     return '\n'.join(lines)
@@ -470,7 +470,7 @@ def run_balance(args):
         'planes_g_mm': [math.hypot(*v) * G_MM for v in solution.planes],
         'permissible_g_mm': None if solution.permissible is None
         else [a * G_MM for a in solution.permissible],
-        'singular_values': solution.singular_values.tolist(),
+        'singular_values_g_mm': (solution.singular_values * G_MM).tolist(),
         'evaluations': solution.evaluations,
         'free': rows,
     }
@@ -510,9 +510,10 @@ def _balance_table(summary):
             lines.append(f"  {label:32} {other['component'] + '.' + other['parameter']:32} "
                          f"{other['derivative']:+.4g} {row['unit']}/{UNITS[other['parameter']]}"
                          f" (+-{moved})")
-    values = summary['singular_values']
-    lines.append(f"singular values of d(planes)/d(free): {', '.join(f'{v:.4g}' for v in values)}"
-                 ' (kg m per unit; a small one: the free parameters barely fix the planes)')
+    values = summary['singular_values_g_mm']
+    lines.append('singular values of d(planes)/d(free) x typical tolerance: '
+                 f"{', '.join(f'{v:.4g}' for v in values)} g mm (a small one: "
+                 'the planes barely fix the solution)')
     return '\n'.join(lines)
 
 

@@ -14,7 +14,9 @@ norm's kink. How sensitive the solution is:
 * the implicit-function derivatives d(solution)/d(other parameter) =
   -J_free^+ J_other: where the free parameters must go when another
   component's mass, radius, angle or z is not its nominal value;
-* the Jacobian's singular values (how well the free parameters fix the planes).
+* the singular values of the Jacobian with each free parameter scaled by its
+  typical tolerance (kg m): a small one is a combination of ordinary misses
+  that barely moves the planes, i.e. a solution the planes hardly fix.
 """
 
 from dataclasses import dataclass
@@ -26,6 +28,7 @@ from scipy.optimize import least_squares
 from cvc_balance.design.parameters import all_parameters, value_of, with_values
 from cvc_balance.design.sensitivity import sensitivities
 from cvc_balance.design.stack import judged_vectors
+from cvc_balance.design.tolerances import typical_tolerances
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.frames import wrap_angle
@@ -43,6 +46,7 @@ class BalanceSolution:
     unbounded); ``planes``
     (n, 2) judged vectors at the solution (kg m); ``jacobian`` (n_free, n, 2)
     kg m per unit; ``moves_with`` (n_free, n_other) d(value)/d(other);
+    ``singular_values`` of the Jacobian times the typical tolerances (kg m);
     ``permissible`` kg m per plane (None without a speed); ``balanced``:
     every plane within :data:`BALANCED` of the size.
     """
@@ -112,6 +116,7 @@ def solve_balance(layout, free, omega=None, grade=None, bounds=None):
     j_free = steep[free_rows].reshape(len(free), -1).T
     j_other = steep[[rows[p] for p in others]].reshape(len(others), -1).T
     moves_with = -np.linalg.pinv(j_free) @ j_other
+    typical = typical_tolerances(layout).values.reshape(-1)
     permissible, within = None, None
     if omega is None:
         omega = layout.balancing.service_speed
@@ -123,8 +128,8 @@ def solve_balance(layout, free, omega=None, grade=None, bounds=None):
     amounts = np.hypot(planes[:, 0], planes[:, 1])
     return BalanceSolution(free, start, values, solved, planes, float(scale),
                            bool(np.all(amounts <= BALANCED * scale)), steep[free_rows],
-                           np.linalg.svd(j_free, compute_uv=False), others, moves_with,
-                           permissible, within, int(fit.nfev))
+                           np.linalg.svd(j_free * typical[free_rows], compute_uv=False),
+                           others, moves_with, permissible, within, int(fit.nfev))
 
 
 def _jacobian(model, free):
@@ -135,7 +140,7 @@ def _jacobian(model, free):
 
 
 def _lower(parameter):
-    """The layout contract's lower bound of a parameter (mass > 0, radius >= 0)."""
+    """Return the layout contract's lower bound of a parameter (mass > 0, radius >= 0)."""
     if parameter.name == 'mass':
         return 1e-12
     if parameter.name == 'radius':

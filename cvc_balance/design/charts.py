@@ -161,7 +161,7 @@ def _inset(ax, result, x, amounts, parameter):
         return
     half = 4.0 * allowed / steep
     local = np.linspace(centre - half, centre + half, 401)
-    inset = ax.inset_axes([0.06, 0.45, 0.3, 0.5])
+    inset = ax.inset_axes([0.35, 0.45, 0.3, 0.5])
     for k in range(amounts.shape[1]):
         base = point.planes[k]
         slope = result.d_planes[i, k] * G_MM

@@ -40,13 +40,13 @@ class DesignParameter:
 
 
 def all_parameters(layout):
-    """Every parameter of every component, component by component."""
+    """Return every parameter of every component, component by component."""
     return tuple(DesignParameter(i, c.name, name) for i, c in enumerate(layout.components)
                  for name in PARAMETERS)
 
 
 def component_index(layout, name):
-    """Index of the component called ``name``; ValueError (one line) if there is none."""
+    """Return the index of component ``name``; ValueError (one line) if there is none."""
     for i, component in enumerate(layout.components):
         if component.name == name:
             return i
@@ -72,13 +72,13 @@ def parse_parameter(layout, text):
 
 
 def value_of(layout, parameter):
-    """The layout's value of ``parameter`` (SI)."""
+    """Return the layout's value of ``parameter`` (SI)."""
     return getattr(layout.components[parameter.index], parameter.name)
 
 
 def with_values(layout, values):
     """
-    A copy of ``layout`` with ``values`` ({DesignParameter: SI value}) set.
+    Return a copy of ``layout`` with ``values`` ({DesignParameter: SI value}) set.
 
     The layout contract's limits hold: mass > 0, radius >= 0, finite values;
     ValueError (one line) otherwise. A shape's own inertia follows its mass;
@@ -101,7 +101,7 @@ def with_values(layout, values):
 
 def own_products(layout):
     """
-    Each component's own products of inertia (P_xz, P_yz), own frame, kg m^2: (n, 2).
+    Return the components' own products of inertia (P_xz, P_yz), own frame: (n, 2).
 
     Positive integrals (int x z dm, int y z dm) about its centre of mass in its
     (radial, tangential, axial) frame. Every parametric shape is symmetric in

@@ -27,7 +27,6 @@ frame (x, y); kg m, kg m^2, N.
 """
 
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -45,7 +44,7 @@ the rounding its own inputs carry (an angle of 180 deg is pi to 1.2e-16 rad)."""
 
 def aggregate_derivatives(mass, radius, angle, z, own=None):
     """
-    d(aggregate)/d(parameter) of components: array (..., 4, 6).
+    Return d(aggregate)/d(parameter) of components: array (..., 4, 6).
 
     ``mass`` (kg), ``radius`` (m), ``angle`` (rad), ``z`` (m): arrays of one
     shape (components, grid points, ...); ``own`` their own products
@@ -71,7 +70,7 @@ def aggregate_derivatives(mass, radius, angle, z, own=None):
 
 def component_aggregates(mass, radius, angle, z, own=None):
     """
-    What components add to the aggregates about O: array (..., 6), :data:`AGGREGATES`.
+    Return what components add to the aggregates about O: (..., 6), :data:`AGGREGATES`.
 
     The point-mass terms of :func:`cvc_balance.physics.inertia.place` and the
     own products turned by theta (the layout's order of the terms above), in
@@ -136,7 +135,7 @@ def balance_of(model, omega=None):
 
 def sensitivities(model, omega=None):
     """
-    Derivatives of the balance of ``model`` (a RotorModel) for every parameter.
+    Differentiate the balance of ``model`` (a RotorModel) by every parameter.
 
     Rows in the order of :func:`cvc_balance.design.parameters.all_parameters`.
     """
@@ -154,7 +153,7 @@ def sensitivities(model, omega=None):
 
 def couple_derivative(model, d_mass, d_static, d_s_z, d_products):
     """
-    d(couple about the centre of mass) from the aggregates' derivatives, (P, 2) kg m^2.
+    Return d(couple about the centre of mass) from the aggregates' derivatives, (P, 2).
 
     The product rule on C = P - S z_c, z_c = S_z / M: dC = dP - dS z_c - S dz_c,
     dz_c = (dS_z - z_c dM) / M, at the model's aggregates.
@@ -190,7 +189,7 @@ def support_vectors(supports, first_moment, products, omega):
 
 def norm_slopes(vector, derivative, size):
     """
-    One-sided slopes (minus side, plus side) of |vector| along a parameter.
+    Return the one-sided slopes (minus side, plus side) of |vector| along a parameter.
 
     ``vector`` (..., 2) and its ``derivative`` (..., 2); away from balance both
     are vector . derivative / |vector|; at balance (|vector| within
@@ -202,8 +201,3 @@ def norm_slopes(vector, derivative, size):
     kink = amount <= AT_BALANCE * size
     along = np.einsum('...i,...i->...', vector, derivative) / np.where(kink, 1.0, amount)
     return np.where(kink, -steep, along), np.where(kink, steep, along)
-
-
-def namespace_model(mass, s_x, s_y, s_z, p_xz, p_yz):
-    """Aggregates as a model-like value (arrays allowed) for the physics' plain formulas."""
-    return SimpleNamespace(mass=mass, s_x=s_x, s_y=s_y, s_z=s_z, p_xz=p_xz, p_yz=p_yz)

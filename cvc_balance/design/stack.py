@@ -114,7 +114,7 @@ def judged_vectors(layout, first_moment, products):
 
 def worst_case_bounds(layout, tolerances, own):
     """
-    Largest change each component can make in each judged plane: (n, n_planes), kg m.
+    Bound the change each component can make in each judged plane: (n, n_planes), kg m.
 
     ``own`` (n, 2): the components' own products (kg m^2). See the module's
     description; exact bound, the linear worst case to first order.
@@ -137,7 +137,7 @@ def worst_case_bounds(layout, tolerances, own):
 
 def analyse(model, tolerances, samples, seed, omega=None, grade=None):
     """
-    The tolerance stack of ``model`` (a RotorModel) under ``tolerances``.
+    Analyse the tolerance stack of ``model`` (a RotorModel) under ``tolerances``.
 
     ``samples`` Monte-Carlo draws from ``seed``; judged at ``omega`` rad/s
     (default: the layout's service speed; None: not judged) against
@@ -192,4 +192,3 @@ def analyse(model, tolerances, samples, seed, omega=None, grade=None):
                           for p in order if sigma[p] > 0.0)
     return StackResult(planes, probability, stderr, contributions, judging, samples, seed,
                        omega, grade if grade is not None else layout.balancing.grade)
-

@@ -150,7 +150,7 @@ class _Aggregates:
 
 
 def _aggregates_without(layout, swept):
-    """Aggregates (6,) of every component but ``swept`` (indexes), about O."""
+    """Aggregate every component but ``swept`` (indexes) about O: (6,)."""
     keep = [i for i in range(len(layout.components)) if i not in set(swept)]
     if not keep:
         return np.zeros(6)

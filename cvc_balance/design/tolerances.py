@@ -52,16 +52,16 @@ class Tolerances:
     normal: np.ndarray
 
     def sigma(self):
-        """Standard deviation of each parameter's draw, (n, 4), SI."""
+        """Return the standard deviation of each parameter's draw, (n, 4), SI."""
         return self.values * np.where(self.normal, NORMAL_SIGMA, UNIFORM_SIGMA)[:, None]
 
     def scaled(self, factors):
-        """These tolerances times ``factors`` ((n, 4) or scalar), same distributions."""
+        """Return these tolerances times ``factors`` ((n, 4) or scalar), same distributions."""
         return Tolerances(self.values * factors, self.normal)
 
 
 def truncated_normal_sigma(bound=TRUNCATION):
-    """Sigma of a standard normal truncated at +-``bound``: sqrt(1 - 2 b phi(b) / (2 Phi(b) - 1))."""
+    """Sigma of a standard normal truncated at +-b: sqrt(1 - 2 b phi(b) / (2 Phi(b) - 1))."""
     density = math.exp(-0.5 * bound * bound) / math.sqrt(2.0 * math.pi)
     inside = math.erf(bound / math.sqrt(2.0))
     return math.sqrt(1.0 - 2.0 * bound * density / inside)
@@ -79,10 +79,10 @@ z 0.5 mm, angle 0.1 deg (about 1 mm at 0.6 m), each 3 sigma of a normal."""
 
 
 def typical_tolerances(layout):
-    """The :data:`TYPICAL` tolerances for every component of ``layout``."""
+    """Return the :data:`TYPICAL` tolerances for every component of ``layout``."""
     mass = layout.placement[0]
-    values = np.column_stack([TYPICAL['mass'] * mass] + [np.full(len(mass), TYPICAL[name])
-                                                          for name in PARAMETERS[1:]])
+    values = np.column_stack([TYPICAL['mass'] * mass]
+                             + [np.full(len(mass), TYPICAL[name]) for name in PARAMETERS[1:]])
     return Tolerances(values, np.ones(len(mass), dtype=bool))
 
 
@@ -142,7 +142,7 @@ def load_tolerances(path, layout):
 
 
 def describe(tolerances, index, column):
-    """A tolerance for people: '+-0.5 mm', '+-0.1 deg', '+-0.05 kg' (and its distribution)."""
+    """Describe a tolerance for people: '+-0.5 mm (3 sigma)', '+-0.1 deg (uniform)'."""
     value = tolerances.values[index, column]
     name = PARAMETERS[column]
     if name == 'angle':
