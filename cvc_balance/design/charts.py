@@ -1,8 +1,9 @@
 """
 Charts of a sweep (:mod:`cvc_balance.design.sweep`): the design package's only matplotlib.
 
-One parameter: the judged planes' unbalance (g mm) with the grade's band and
-an inset around each balance point (the band is narrow: the thesis's point),
+One parameter: the judged planes' unbalance (g mm) with the grade's band and,
+beside it, the first balance point's neighbourhood (the band is narrow there:
+the thesis's point),
 the supports' unbalance loads and the resultant F_res (N), and, asked for,
 the derivative of F_res: the norm's one-sided slope (which jumps at balance,
 thesis Figs. 4.3, 4.4, 4.7, 4.8) beside the vector's components (smooth).
@@ -66,10 +67,16 @@ def _one_parameter(result, derivative):
     parameter = result.parameters[0]
     x = axis_values(parameter, result.axes[0])
     rows = 2 + (derivative and result.d_resultant is not None)
-    figure, axes = plt.subplots(rows, 1, figsize=(9, 3.3 * rows + 0.6), sharex=True,
-                                constrained_layout=True)
     amounts = np.hypot(result.planes[..., 0], result.planes[..., 1]) * G_MM
-    top = axes[0]
+    zoom = _zoom_range(result, amounts)
+    figure = plt.figure(figsize=(10.5 if zoom else 9, 3.3 * rows + 0.6),
+                        constrained_layout=True)
+    # With a zoom panel beside the first row, the other rows keep the same width (their
+    # legends go beside them), so the parameter axis lines up from top to bottom.
+    grid = figure.add_gridspec(rows, 2 if zoom else 1, width_ratios=(3, 1) if zoom else None)
+    top = figure.add_subplot(grid[0, 0])
+    axes = [top] + [figure.add_subplot(grid[row, 0], sharex=top) for row in range(1, rows)]
+    beside = [figure.add_subplot(grid[row, 1]) for row in range(1, rows)] if zoom else []
     for i, label in enumerate(_plane_labels(result)):
         top.plot(x, amounts[:, i], color=COLOURS[i], label=label,
                  linestyle='-' if i == 0 else '--')
@@ -79,7 +86,8 @@ def _one_parameter(result, derivative):
     top.set_ylim(bottom=0.0)
     top.legend(loc='upper right', fontsize=8)
     top.grid(alpha=0.3)
-    _inset(top, result, x, amounts, parameter)
+    if zoom:
+        _zoom(figure.add_subplot(grid[0, 1]), result, parameter, *zoom)
     loads = axes[1]
     if result.supports is not None:
         for i, support in enumerate(result.layout.supports):
@@ -98,6 +106,13 @@ def _one_parameter(result, derivative):
     loads.grid(alpha=0.3)
     if rows == 3:
         _derivative(axes[2], result, x, parameter)
+    for ax, side in zip(axes[1:], beside):
+        side.axis('off')
+        if ax.get_legend() is not None:
+            ax.get_legend().remove()
+            side.legend(*ax.get_legend_handles_labels(), loc='center left', fontsize=8)
+    for ax in axes[:-1]:
+        ax.tick_params(labelbottom=False)
     axes[-1].set_xlabel(axis_label(parameter))
     return figure
 
@@ -146,37 +161,43 @@ def _mark_points(ax, result, parameter, label=True):
                         color='red' if point.balanced else 'dimgrey')
 
 
-def _inset(ax, result, x, amounts, parameter):
-    """Zoom on the first balance point when the grade's band is too thin to see."""
-    if result.permissible is None or not result.balance_points:
-        return
+def _zoom_range(result, amounts):
+    """(point, index, half-width) to zoom on when the grade's band is too thin to see."""
+    if result.permissible is None or not result.balance_points or result.d_planes is None:
+        return None
     allowed = float(np.max(result.permissible)) * G_MM
     if allowed > 0.05 * float(np.max(amounts)):
-        return
+        return None
     point = result.balance_points[0]
-    centre = point.values[0]
-    i = int(np.argmin(np.abs(result.axes[0] - centre)))
-    steep = float(np.max(np.hypot(result.d_planes[i, :, 0], result.d_planes[i, :, 1]))) * G_MM
+    index = int(np.argmin(np.abs(result.axes[0] - point.values[0])))
+    steep = float(np.max(np.hypot(result.d_planes[index, :, 0],
+                                  result.d_planes[index, :, 1]))) * G_MM
     if steep <= 0.0:
-        return
-    half = 4.0 * allowed / steep
+        return None
+    return point, index, 4.0 * allowed / steep
+
+
+def _zoom(ax, result, parameter, point, index, half):
+    """The balance point's neighbourhood, linearised (the derivative there), with the band."""
+    centre = point.values[0]
     local = np.linspace(centre - half, centre + half, 401)
-    inset = ax.inset_axes([0.35, 0.45, 0.3, 0.5])
-    for k in range(amounts.shape[1]):
-        base = point.planes[k]
-        slope = result.d_planes[i, k] * G_MM
-        # Linear in the parameter this close to the point (exact for mass and radius).
-        values = np.hypot(base[0] * G_MM + slope[0] * (local - centre),
-                          base[1] * G_MM + slope[1] * (local - centre))
-        inset.plot(axis_values(parameter, local), values, color=COLOURS[k],
-                   linestyle='-' if k == 0 else '--')
-    inset.axhspan(0.0, float(np.min(result.permissible)) * G_MM, color='tab:green', alpha=0.2)
+    allowed = float(np.max(result.permissible)) * G_MM
+    for k in range(result.planes.shape[-2]):
+        base = np.asarray(point.planes[k]) * G_MM
+        slope = result.d_planes[index, k] * G_MM
+        values = np.hypot(base[0] + slope[0] * (local - centre),
+                          base[1] + slope[1] * (local - centre))
+        ax.plot(axis_values(parameter, local), values, color=COLOURS[k],
+                linestyle='-' if k == 0 else '--')
+    ax.axhspan(0.0, float(np.min(result.permissible)) * G_MM, color='tab:green', alpha=0.15)
     for k, value in enumerate(result.permissible * G_MM):
-        inset.axhline(value, color=COLOURS[k], linewidth=0.8, linestyle=':')
-    inset.set_ylim(0.0, 3.0 * allowed)
-    inset.tick_params(labelsize=7)
-    inset.set_title('near the point: the grade band', fontsize=7)
-    inset.grid(alpha=0.3)
+        ax.axhline(value, color=COLOURS[k], linewidth=0.8, linestyle=':')
+    ax.set_ylim(0.0, 3.0 * allowed)
+    ax.xaxis.set_major_locator(plt.MaxNLocator(3))
+    ax.tick_params(labelsize=8)
+    ax.set_title('near the point (linearised):\nthe grade band', fontsize=9)
+    ax.set_xlabel(axis_label(parameter), fontsize=8)
+    ax.grid(alpha=0.3)
 
 
 def _two_parameters(result):
@@ -192,9 +213,11 @@ def _two_parameters(result):
     figure.colorbar(filled, ax=ax, label='worse plane unbalance [g mm]')
     if result.permissible is not None:
         ratio = np.max(amounts / (result.permissible * G_MM), axis=-1)
-        if np.min(ratio) <= 1.0:
+        inside = int(np.count_nonzero(ratio <= 1.0))
+        if inside > 1:
             ax.contour(x, y, ratio.T, levels=[1.0], colors='white', linewidths=1.2)
-        ax.plot([], [], color='white', label=f'edge of G {result.grade:g}')
+        note = '' if inside > 1 else ' (narrower than the grid)'
+        ax.plot([], [], color='white', label=f'edge of G {result.grade:g}{note}')
     _mark_map(ax, result, px, py)
     ax.set_xlabel(axis_label(px))
     ax.set_ylabel(axis_label(py))
