@@ -200,7 +200,7 @@ def _sensitivity_table(summary, tolerances, layout):
              f'ranked by how far their tolerance moves the worse plane ({worse}'
              + (f', allowed {allowed[max(judged - 1, 0)]:.4g} g mm' if allowed else '') + ')',
              f"tolerances: {summary['tolerances']}", '',
-             f"{'parameter':32}{'tolerance':24}{'moves':>12}   derivative per unit "
+             f"{'parameter':32}{'tolerance':24}{'moves':>15}   derivative per unit "
              '(rotor frame x, y)']
     for row in summary['parameters']:
         label = f"{row['component']}.{row['parameter']}"
@@ -214,7 +214,7 @@ def _sensitivity_table(summary, tolerances, layout):
         else:
             text = f"static ({row['d_static_kg_m'][0]:.4g}, {row['d_static_kg_m'][1]:.4g}) " \
                 f'kg m/{unit}'
-        lines.append(f"{label:32}{tolerance:24}{row['moves_worse_plane_g_mm']:>7.4g} g mm"
+        lines.append(f"{label:32}{tolerance:24}{row['moves_worse_plane_g_mm']:>10.4g} g mm"
                      f'   {text}')
     lines += ['', 'moves: |d U_worse / dp| x tolerance; derivatives of the vectors (smooth '
               'through balance); --json adds static, couple, supports, and --norms the '
@@ -448,6 +448,7 @@ def run_balance(args):
                         for a, s in zip(solution.permissible, steep))
         effects = sorted(((abs(solution.moves_with[k, j]) * tolerances[o.index, o.column], j)
                           for j, o in enumerate(solution.others)), reverse=True)
+        largest = effects[0][0] if effects else 0.0
         rows.append({
             'component': parameter.component, 'parameter': parameter.name,
             'unit': UNITS[parameter.name],
@@ -460,7 +461,7 @@ def run_balance(args):
                             'typical_tolerance': float(
                                 tolerances[solution.others[j].index, solution.others[j].column]),
                             'moves_by': effect}
-                           for effect, j in effects if effect > 0.0],
+                           for effect, j in effects if effect > 1e-9 * largest],
         })
     summary = {
         'layout': {'name': layout.name, 'digest': layout.digest()},
