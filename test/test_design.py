@@ -473,7 +473,7 @@ def test_seed_fixes_the_draws_on_any_number_of_threads():
 
 
 def own_monte_carlo(layout, values, normal, samples, seed):
-    """The test's probability within grade: scipy's distributions, float64 sums."""
+    """Return the probability within grade by the test's own draws (scipy), float64 sums."""
     rng = np.random.default_rng(seed)
     n = len(layout.components)
     draws = np.empty((samples, n, 4))

@@ -178,7 +178,7 @@ def _zoom_range(result, amounts):
 
 
 def _zoom(ax, result, parameter, point, index, half):
-    """The balance point's neighbourhood, linearised (the derivative there), with the band."""
+    """Draw the balance point's neighbourhood, linearised (its derivative), with the band."""
     centre = point.values[0]
     local = np.linspace(centre - half, centre + half, 401)
     allowed = float(np.max(result.permissible)) * G_MM
