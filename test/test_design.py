@@ -37,7 +37,7 @@ from cvc_balance.design.allocation import allocate
 from cvc_balance.design.balance_point import solve_balance
 from cvc_balance.design.monte_carlo import simulate
 from cvc_balance.design.parameters import parse_parameter, with_values
-from cvc_balance.design.sensitivity import norm_slopes, sensitivities
+from cvc_balance.design.sensitivity import judged_vectors, norm_slopes, sensitivities
 from cvc_balance.design.stack import analyse
 from cvc_balance.design.sweep import sweep
 from cvc_balance.design.tolerances import load_tolerances, ToleranceError, Tolerances
@@ -318,7 +318,6 @@ def test_monte_carlo_agrees_with_the_linearised_rss_on_small_tolerances(normal):
     draws = simulate(model, tolerances, samples, seed=3)
     sens = sensitivities(model)
     nominal = np.array([p.vector for p in plane_unbalances(model, -0.12, 0.12, 0.68)])
-    from cvc_balance.design.stack import judged_vectors
     change = judged_vectors(layout, draws.first_moment, draws.products) - nominal
     sigma = tolerances.sigma().reshape(-1)
     for k, plane in enumerate(result.planes):
@@ -636,6 +635,13 @@ BAD_ARGUMENTS = {
                       '--range', '0', '1', '--points', '1'], 'points'),
     'out of grade': (['tolerance', TWO, '--tolerances', '{two_tol}', '--target-probability',
                       '0.9'], 'out of G'),
+    'samples not a number': (['tolerance', GANTRY, '--tolerances', '{tol}', '--samples',
+                              'many'], '--samples'),
+    'no tolerance file': (['tolerance', GANTRY], '--tolerances'),
+    'range not a number': (['sweep', GANTRY, '--component', 'detector', '--parameter', 'z',
+                            '--range', '0', 'far'], '--range'),
+    'unknown parameter choice': (['sweep', GANTRY, '--component', 'detector', '--parameter',
+                                  'speed', '--range', '0', '1'], '--parameter'),
 }
 
 
@@ -652,8 +658,12 @@ def test_bad_arguments_get_one_line_and_exit_code_2(case, tmp_path, capsys):
     argv = [str(a).format(tol=tol, two_tol=two_tol) for a in argv]
     if case == 'out of grade':
         argv[1] = str(unbalanced)
-    code, out, err = run_cli(capsys, *argv, '-o' if argv[0] == 'sweep' else '--json',
-                             *([tmp_path / 'x.png'] if argv[0] == 'sweep' else []))
+    try:
+        code, out, err = run_cli(capsys, *argv, '-o' if argv[0] == 'sweep' else '--json',
+                                 *([tmp_path / 'x.png'] if argv[0] == 'sweep' else []))
+    except SystemExit as stop:             # argparse's own errors (types, choices, missing)
+        out, err = capsys.readouterr()
+        code = stop.code
     assert code == 2 and out == '' and len(err.strip().splitlines()) == 1, err
     assert needle in err, err
 

@@ -10,7 +10,7 @@ prints them); angles in degrees where people type or read them.
 import json
 import math
 
-from cvc_balance.cli.arguments import finite
+from cvc_balance.cli.arguments import EXIT_BAD_INPUT, finite
 from cvc_balance.design.parameters import design_parameter, parse_parameter, PARAMETERS, UNITS
 from cvc_balance.design.tolerances import describe, load_tolerances, typical_tolerances
 from cvc_balance.physics.engine import RotorModel
@@ -20,7 +20,8 @@ from cvc_balance.physics.layout_file import load_layout
 G_MM = 1e6
 """g mm per kg m."""
 DEFAULT_SAMPLES = 200_000
-MAX_SAMPLES = 100_000_000
+MAX_SAMPLES = 20_000_000
+"""Most draws: about 2 GB of draws and statistics."""
 
 
 def register(commands):
@@ -107,7 +108,12 @@ def register(commands):
 
 
 def _layout_argument(parser):
+    """Add the LAYOUT argument, and make the parser's own errors one line (no usage block)."""
     parser.add_argument('layout', metavar='LAYOUT', help='layout file (YAML or JSON)')
+
+    def error(message):
+        parser.exit(EXIT_BAD_INPUT, f'{parser.prog}: error: {message} (see --help)\n')
+    parser.error = error
 
 
 def _speed(args, layout):

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from cvc_balance.design.stack import analyse, judged_vectors
-from cvc_balance.design.sensitivity import sensitivities
+from cvc_balance.design.sensitivity import judged_vectors, sensitivities
+from cvc_balance.design.stack import analyse
 from cvc_balance.design.tolerances import NORMAL_SIGMA, Tolerances, UNIFORM_SIGMA
 from cvc_balance.physics.assessment import assess_balance
 

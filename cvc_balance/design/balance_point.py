@@ -26,8 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from cvc_balance.design.parameters import all_parameters, value_of, with_values
-from cvc_balance.design.sensitivity import sensitivities
-from cvc_balance.design.stack import judged_vectors
+from cvc_balance.design.sensitivity import judged_vectors, sensitivities
 from cvc_balance.design.tolerances import typical_tolerances
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel

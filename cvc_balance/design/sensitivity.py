@@ -174,6 +174,17 @@ def plane_vectors(layout, first_moment, products):
     return np.stack([np.stack(plane, axis=-1) for plane in split], axis=-2)
 
 
+def judged_vectors(layout, first_moment, products):
+    """
+    Return the judged planes' vectors (..., n, 2) from S (..., 2) and P (..., 2) about O.
+
+    The two correction planes' (:func:`plane_vectors`), or without them the static
+    unbalance alone (n = 1): what the ISO verdict judges.
+    """
+    planes = plane_vectors(layout, first_moment, products)
+    return np.asarray(first_moment)[..., None, :] if planes is None else planes
+
+
 def support_vectors(supports, first_moment, products, omega):
     """Unbalance load at each support at ``omega``, rotor frame: (..., n_supports, 2), N."""
     if omega is None:

@@ -34,7 +34,7 @@ import numpy as np
 
 from cvc_balance.design.monte_carlo import simulate
 from cvc_balance.design.parameters import own_products
-from cvc_balance.design.sensitivity import sensitivities
+from cvc_balance.design.sensitivity import judged_vectors, sensitivities
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.unbalance import two_plane_split
 
@@ -100,16 +100,6 @@ def plane_weights(layout):
     from_s = two_plane_split((1.0, 0.0), (0.0, 0.0), *planes)
     from_p = two_plane_split((0.0, 0.0), (1.0, 0.0), *planes)
     return tuple((s[0], p[0]) for s, p in zip(from_s, from_p))
-
-
-def judged_vectors(layout, first_moment, products):
-    """Judged planes' vectors (..., n_planes, 2) from S (..., 2) and P (..., 2) about O."""
-    planes = layout.correction_planes()
-    if planes is None:
-        return np.asarray(first_moment)[..., None, :]
-    split = two_plane_split((first_moment[..., 0], first_moment[..., 1]),
-                            (products[..., 0], products[..., 1]), *planes)
-    return np.stack([np.stack(plane, axis=-1) for plane in split], axis=-2)
 
 
 def worst_case_bounds(layout, tolerances, own):

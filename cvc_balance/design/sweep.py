@@ -24,7 +24,7 @@ import numpy as np
 from cvc_balance.design.balance_point import solve_balance
 from cvc_balance.design.parameters import own_products, PARAMETERS, with_values
 from cvc_balance.design.sensitivity import (aggregate_derivatives, component_aggregates,
-                                            norm_slopes, plane_vectors, support_vectors)
+                                            judged_vectors, norm_slopes, support_vectors)
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import own_tensors_of, RotorModel
 from cvc_balance.physics.frames import products_of_inertia
@@ -32,7 +32,8 @@ from cvc_balance.physics.inertia import place
 from cvc_balance.physics.unbalance import couple_unbalance
 
 MAX_POINTS = 2001
-"""Most grid points per parameter (a 2-D grid has at most MAX_POINTS^2 / 4)."""
+"""Most grid points along one parameter; a map takes at most MAX_MAP_POINTS a side."""
+MAX_MAP_POINTS = 501
 
 
 @dataclass(frozen=True)
@@ -86,8 +87,10 @@ def sweep(layout, parameters, ranges, points, omega=None):
         raise ValueError('sweep one or two parameters, each with a range')
     if len(set(parameters)) != len(parameters):
         raise ValueError(f'parameter {parameters[0].label} given twice')
-    if not 2 <= points <= MAX_POINTS:
-        raise ValueError(f'--points must be 2..{MAX_POINTS}, got {points}')
+    most = MAX_POINTS if len(parameters) == 1 else MAX_MAP_POINTS
+    if not 2 <= points <= most:
+        raise ValueError(f'--points must be 2..{most} for {len(parameters)} parameter(s), '
+                         f'got {points}')
     for p, (low, high) in zip(parameters, ranges):
         if not low < high:
             raise ValueError(f'{p.label}: range must go from low to high, got {low:g} {high:g}')
@@ -116,9 +119,7 @@ def sweep(layout, parameters, ranges, points, omega=None):
     mass, s_x, s_y, s_z, p_xz, p_yz = np.moveaxis(total, -1, 0)
     static = np.stack((s_x, s_y), axis=-1)
     products = np.stack((p_xz, p_yz), axis=-1)
-    planes = plane_vectors(layout, static, products)
-    if planes is None:
-        planes = static[..., None, :]
+    planes = judged_vectors(layout, static, products)
     couple = np.stack(couple_unbalance(_Aggregates(mass, s_x, s_y, s_z, p_xz, p_yz)), axis=-1)
     supports = support_vectors(layout.supports, static, products, omega)
     resultant = None if omega is None else omega * omega * np.hypot(s_x, s_y)
@@ -128,9 +129,7 @@ def sweep(layout, parameters, ranges, points, omega=None):
         p = parameters[0]
         d = aggregate_derivatives(*columns[p.index], own[p.index])[..., p.column, :]
         d_static, d_products = d[..., 1:3], d[..., 4:6]
-        d_planes = plane_vectors(layout, d_static, d_products)
-        if d_planes is None:
-            d_planes = d_static[..., None, :]
+        d_planes = judged_vectors(layout, d_static, d_products)
         if omega is not None:
             w2 = omega * omega
             size = w2 * float(np.sum(np.abs(layout.placement[0] * layout.placement[1])))
