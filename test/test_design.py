@@ -714,3 +714,15 @@ def test_the_installed_command_runs_without_a_traceback(tmp_path):
                           '--tolerances', str(tol)], capture_output=True, text=True)
     assert run.returncode == 2 and 'Traceback' not in run.stderr
     assert len(run.stderr.strip().splitlines()) == 1
+
+
+def test_matplotlib_only_in_the_chart_module():
+    """The design package's pictures are drawn in one module (test_architecture: its layer)."""
+    import ast
+    for path in sorted((ROOT / 'cvc_balance' / 'design').glob('*.py')):
+        tree = ast.parse(path.read_text())
+        names = {alias.name.split('.')[0] for node in ast.walk(tree)
+                 if isinstance(node, ast.Import) for alias in node.names}
+        names |= {node.module.split('.')[0] for node in ast.walk(tree)
+                  if isinstance(node, ast.ImportFrom) and node.module}
+        assert ('matplotlib' in names) == (path.name == 'charts.py'), path.name
