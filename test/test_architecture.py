@@ -20,6 +20,7 @@ LAYERS = {
     'physics': 0,      # numpy only: layouts, engine, unbalance, ISO 21940, motion
     'identify': 1,     # the unbalance from measured support loads (numpy)
     'messages': 1,     # topic names and types, CDR, ros2msg schemas (no rclpy)
+    'design': 1,       # sensitivities, tolerance stacks, balance points, sweeps and charts
     'bag': 2,          # MCAP reading and writing, replay, scenarios (no rclpy)
     'view': 2,         # rerun
     'study': 2,        # methods side by side, the 40-digit reference, the bench
@@ -32,6 +33,7 @@ THIRD_PARTY = {
     'physics': {'numpy', 'yaml'},
     'identify': {'numpy'},
     'messages': {'ament_index_python'},
+    'design': {'numpy', 'scipy', 'yaml', 'matplotlib'},   # matplotlib in design/charts only
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
     'view': {'numpy', 'rerun'},
     'study': {'numpy', 'mpmath', 'matplotlib'},

@@ -78,16 +78,29 @@ def plane_unbalances(model, z_i, z_ii, correction_radius):
 
     Returns (plane I, plane II) as :class:`PlaneUnbalance`.
     """
-    span = z_ii - z_i
-    s_x, s_y, p_xz, p_yz = model.s_x, model.s_y, model.p_xz, model.p_yz
+    split = two_plane_split((model.s_x, model.s_y), (model.p_xz, model.p_yz), z_i, z_ii)
     planes = []
-    for z, (u_x, u_y) in ((z_i, ((z_ii * s_x - p_xz) / span, (z_ii * s_y - p_yz) / span)),
-                          (z_ii, ((p_xz - z_i * s_x) / span, (p_yz - z_i * s_y) / span))):
+    for z, (u_x, u_y) in zip((z_i, z_ii), split):
         amount, angle = polar(u_x, u_y)
         mass = amount / correction_radius if correction_radius > 0.0 else None
         planes.append(PlaneUnbalance(z, amount, angle, mass, correction_radius,
                                      _opposite(angle)))
     return tuple(planes)
+
+
+def two_plane_split(first_moment, products, z_i, z_ii):
+    """
+    Split the dynamic unbalance into planes z_i < z_ii (m): ((U_Ix, U_Iy), (U_IIx, U_IIy)).
+
+    From the first moment (S_x, S_y) (kg m) and the products (P_xz, P_yz) about
+    O (kg m^2): U_I = (z_II S - P_O) / b, U_II = (P_O - z_I S) / b, kg m. Plain
+    arithmetic, linear in its first two arguments: floats or numpy arrays (the
+    design tools split derivatives and Monte-Carlo draws with it).
+    """
+    span = z_ii - z_i
+    (s_x, s_y), (p_xz, p_yz) = first_moment, products
+    return (((z_ii * s_x - p_xz) / span, (z_ii * s_y - p_yz) / span),
+            ((p_xz - z_i * s_x) / span, (p_yz - z_i * s_y) / span))
 
 
 def _opposite(angle):
