@@ -30,7 +30,7 @@ THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
     'physics': {'numpy', 'yaml'},
     'messages': {'ament_index_python'},
-    'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
+    'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal', 'rosbags'},
     'view': {'numpy', 'rerun'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
 }

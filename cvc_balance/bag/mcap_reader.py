@@ -86,33 +86,30 @@ class ChunkInfo:
     walked: bool = False
 
 
-def select_channel(channels, topic, msg_type, where, option=None):
+def select_channel(channels, topic, msg_type, where, option=None, exact=False):
     """
     Return the channel of ``channels`` (ChannelInfo-like values) for ``topic``, or None.
 
-    ``topic`` is a name, with or without its leading '/'. Given by the user
-    (``option`` names the command-line option), it must match a topic exactly;
-    the default name (the node's relative topic) also matches a namespaced or
-    remapped one (``/gantry/joint_states``) if exactly one does. A match of
-    another type than ``msg_type``, or several matches, is a :class:`BagError`
-    naming the bag's topics.
+    ``topic`` is a name, with or without its leading '/'. ``exact``: only that
+    topic (one the user named); else a namespaced or remapped topic ending in
+    it (``/gantry/joint_states``) also matches if no topic has the name itself
+    and exactly one ends in it. Several matches, or a match of another type than
+    ``msg_type``, is a :class:`BagError` naming the bag's topics (and ``option``,
+    the command-line option that chooses one).
     """
     wanted = topic.strip('/')
     found = [c for c in channels if c.topic.strip('/') == wanted]
-    if not found and option is None:
+    if not found and not exact:
         found = [c for c in channels if c.topic.endswith('/' + wanted)]
-    topics = {c.topic for c in found}
-    if len(topics) > 1:
-        raise BagError(f'{where}: several topics match {topic}: {", ".join(sorted(topics))}; '
-                       f'choose one with {option or _OPTIONS.get(wanted, "its option")}')
+    names = {c.topic for c in found}
+    if len(names) > 1:
+        raise BagError(f'{where}: several topics match {topic}: {", ".join(sorted(names))}; '
+                       f'choose one{f" with {option}" if option else ""}')
     for c in found:
         if c.msg_type != msg_type:
             raise BagError(f'{where}: topic {c.topic} has type {c.msg_type or "(none)"}, '
                            f'expected {msg_type}; the bag has: {describe_topics(channels)}')
     return found[0] if found else None
-
-
-_OPTIONS = {'joint_states': '--joint-states', 'speed': '--speed', 'layout': '--layout'}
 
 
 def describe_topics(channels):
@@ -295,13 +292,17 @@ class Bag:
             chunk.indexes = {int(c): messages[channel == c] for c in np.unique(channel)}
             chunk.walked = True
 
+    def note(self, problem):
+        """Report a problem found while reading."""
+        self.problems.append(problem)
+
     def topics(self):
         """Return {topic: message type} of the bag's channels."""
         return {c.topic: c.msg_type for c in self.channels.values()}
 
-    def channel(self, topic, msg_type, option=None):
+    def channel(self, topic, msg_type, option=None, exact=False):
         """Return the channel of ``topic`` with ``msg_type`` (see :func:`select_channel`)."""
-        return select_channel(self.channels.values(), topic, msg_type, self.path, option)
+        return select_channel(self.channels.values(), topic, msg_type, self.path, option, exact)
 
     # -- message access ----------------------------------------------------------------
 
@@ -730,6 +731,5 @@ def string_samples(bag, channel):
         try:
             out.append((log_time, read_string_message(data)))
         except (ValueError, UnicodeDecodeError) as error:
-            bag.problems.append(f'{channel.topic}: message at {log_time} ns unreadable '
-                                f'({error}); skipped')
+            bag.note(f'{channel.topic}: message at {log_time} ns unreadable ({error}); skipped')
     return sorted(out, key=lambda pair: pair[0])
