@@ -31,6 +31,7 @@ from mcap_ros2.writer import Writer as McapRos2Writer
 import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader as Rosbag2Reader, StoragePlugin, Writer as Rosbag2Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
@@ -153,9 +154,12 @@ def write_mcap_ros2(path, run, **options):
         writer.finish()
 
 
-def write_rosbag2(path, events, storage):
-    """rosbags' rosbag2 Writer (metadata.yaml version 9) with ``storage``."""
-    with Rosbag2Writer(path, version=9, storage_plugin=storage) as writer:
+def write_rosbag2(path, events, storage, compression=None):
+    """rosbags' rosbag2 Writer (metadata.yaml version 9) with ``storage``, rosbag2 compression."""
+    writer = Rosbag2Writer(path, version=9, storage_plugin=storage)
+    if compression is not None:
+        writer.set_compression(compression, CompressionFormat.ZSTD)
+    with writer:
         connections = {}
         for log_time, topic, msg_type, data in events:
             if topic not in connections:
@@ -333,20 +337,27 @@ def test_mcap_ros2_writer_bags_replay_as_the_engine(compression, run, reference,
     assert_outputs(tmp_path / 'out', reference)
 
 
-@pytest.mark.parametrize('storage', ['MCAP', 'SQLITE3'])
-def test_rosbags_rosbag2_directories_replay_as_the_engine(storage, run, reference, tmp_path):
+@pytest.mark.parametrize('storage, compression', [('MCAP', None), ('SQLITE3', None),
+                                                  ('MCAP', 'MESSAGE'), ('MCAP', 'FILE'),
+                                                  ('SQLITE3', 'FILE')])
+def test_rosbags_rosbag2_directories_replay_as_the_engine(storage, compression, run, reference,
+                                                          tmp_path):
+    """rosbags' rosbag2 writer: mcap and sqlite3 storage, rosbag2's per-message and file zstd."""
     path = tmp_path / 'rosbag2'
-    write_rosbag2(path, run.events, StoragePlugin[storage])
-    suffix = {'MCAP': '.mcap', 'SQLITE3': '.db3'}[storage]
-    assert [p.suffix for p in path.iterdir() if p.name != 'metadata.yaml'] == [suffix]
+    write_rosbag2(path, run.events, StoragePlugin[storage],
+                  CompressionMode[compression] if compression else None)
+    suffix = {'MCAP': '.mcap', 'SQLITE3': '.db3'}[storage] + ('.zstd' if compression == 'FILE'
+                                                              else '')
+    assert [''.join(p.suffixes) for p in path.iterdir() if p.name != 'metadata.yaml'] == \
+        [suffix]
     assert_inputs_read(path, run)
     summary = replay(path, tmp_path / 'out.mcap')
     assert (summary.accepted, summary.rejected) == (len(run.stamps), 0)
     assert summary.problems == []
     assert_outputs(tmp_path / 'out.mcap', reference)
-    # The storage file alone (a .db3 or .mcap without its directory) is a bag too.
-    (file,) = path.glob(f'*{suffix}')
-    assert replay(file).accepted == len(run.stamps)
+    if compression is None:   # the storage file alone (without its directory) is a bag too
+        (file,) = path.glob(f'*{suffix}')
+        assert replay(file).accepted == len(run.stamps)
 
 
 def test_split_rosbag2_directory_is_one_run(run, reference, tmp_path):
