@@ -62,7 +62,7 @@ def foreign_messages(bag):
 
 
 def write_with_mcap_library(messages, path):
-    """The run as the mcap library's writer makes it (its defaults), schemas from rosbags."""
+    """Write the run as the mcap library's writer makes it (its defaults), schemas from rosbags."""
     from mcap.writer import Writer
     from rosbags.typesys import get_typestore, Stores
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -81,7 +81,7 @@ def write_with_mcap_library(messages, path):
 
 
 def write_split_directory(messages, path, parts=3):
-    """The run split in ``parts`` MCAP files of one rosbag2 directory (rosbags' Writer)."""
+    """Write the run split in ``parts`` MCAP files of one rosbag2 directory (rosbags' Writer)."""
     import shutil
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import get_typestore, Stores

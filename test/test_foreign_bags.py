@@ -64,7 +64,7 @@ class Run:
 
 
 def joint_state(stamp, names, positions, velocities):
-    """A sensor_msgs/JointState as rosbags' message object."""
+    """Make a sensor_msgs/JointState, as rosbags' message object."""
     types = STORE.types
     return types[JOINT_STATE](
         header=types['std_msgs/msg/Header'](
@@ -114,7 +114,7 @@ def msgdef(msg_type):
 
 
 def write_mcap(path, run, **options):
-    """The mcap library's writer (mcap.writer.Writer) with ``options``, rosbag2's profile."""
+    """Write with the mcap library's writer (mcap.writer.Writer), ``options``, profile ros2."""
     with open(path, 'wb') as stream:
         writer = McapWriter(stream, **options)
         writer.start(profile='ros2', library='test')
@@ -155,7 +155,7 @@ def write_mcap_ros2(path, run, **options):
 
 
 def write_rosbag2(path, events, storage, compression=None):
-    """rosbags' rosbag2 Writer (metadata.yaml version 9) with ``storage``, rosbag2 compression."""
+    """Write with rosbags' rosbag2 Writer (metadata.yaml version 9), ``storage``, compression."""
     writer = Rosbag2Writer(path, version=9, storage_plugin=storage)
     if compression is not None:
         writer.set_compression(compression, CompressionFormat.ZSTD)
@@ -169,7 +169,7 @@ def write_rosbag2(path, events, storage, compression=None):
 
 def write_split(path, run, parts=3):
     """
-    A rosbag2 directory of ``parts`` MCAP files, as ``ros2 bag record --max-bag-duration``.
+    Write a rosbag2 directory of ``parts`` MCAP files, as ``ros2 bag record`` splits a run.
 
     Each time slice is written by rosbags' Writer; the files are gathered in one
     directory as ``NAME_i.mcap`` and metadata.yaml lists them (rosbag2's layout:
@@ -239,7 +239,7 @@ def read_outputs(path):
 
 @pytest.fixture(scope='module')
 def reference(tmp_path_factory):
-    """The engine's outputs per topic and the replay of the project's own bag of the run."""
+    """Return the engine's outputs per topic and the replay of the project's own bag of the run."""
     folder = tmp_path_factory.mktemp('own')
     own = folder / 'own.mcap'
     write_bag(load_scenario(SCENARIO), own)
@@ -257,7 +257,7 @@ def run():
 
 
 def assert_outputs(path, reference, errors=None):
-    """The replay's outputs at ``path`` equal the engine's (TOLERANCE) and the own bag's."""
+    """Check that the outputs at ``path`` equal the engine's (TOLERANCE) and the own bag's."""
     engine, own = reference
     got = read_outputs(path)
     assert got.keys() == engine.keys() == own.keys()
@@ -273,7 +273,7 @@ def assert_outputs(path, reference, errors=None):
 
 
 def assert_inputs_read(path, run, names=None):
-    """The motion the reader finds is the scenario's, exactly."""
+    """Check that the motion the reader finds is the scenario's, exactly."""
     motion, layouts = read_inputs(open_bag(path), 'gantry_joint', names)
     assert np.array_equal(motion.stamp, run.stamps)
     assert np.array_equal(motion.log_time, run.stamps)
@@ -342,7 +342,7 @@ def test_mcap_ros2_writer_bags_replay_as_the_engine(compression, run, reference,
                                                   ('SQLITE3', 'FILE')])
 def test_rosbags_rosbag2_directories_replay_as_the_engine(storage, compression, run, reference,
                                                           tmp_path):
-    """rosbags' rosbag2 writer: mcap and sqlite3 storage, rosbag2's per-message and file zstd."""
+    """Directories by rosbags' rosbag2 writer: mcap, sqlite3 storage, per-message and file zstd."""
     path = tmp_path / 'rosbag2'
     write_rosbag2(path, run.events, StoragePlugin[storage],
                   CompressionMode[compression] if compression else None)

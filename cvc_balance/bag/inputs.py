@@ -65,7 +65,7 @@ def input_channels(bag, names=None):
 
 
 def _channel(bag, given, name, msg_type):
-    """The channel of input ``name``: the node's name by default, else the one ``given``."""
+    """Find the channel of input ``name``: the node's name by default, else the one ``given``."""
     if given is None:
         return bag.channel(getattr(topics, name.upper()), msg_type, OPTIONS[name])
     channel = bag.channel(given, msg_type, OPTIONS[name], exact=True)

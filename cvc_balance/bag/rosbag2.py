@@ -400,7 +400,7 @@ def metadata_yaml(file_name, topics, first, last):
 
 
 def _qos(topic):
-    """The offered QoS of a topic's publisher as metadata.yaml version 9 writes it."""
+    """Return the offered QoS of a topic's publisher as metadata.yaml version 9 writes it."""
     forever = {'sec': 2147483647, 'nsec': 4294967295}
     return {'history': 'unknown', 'depth': 0,
             'reliability': 'best_effort' if topic.best_effort else 'reliable',
