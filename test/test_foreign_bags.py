@@ -638,3 +638,41 @@ def test_fuzzed_foreign_bags_give_a_bag_error_or_what_can_be_read(tmp_path):
         assert len(motion.stamp) == len(motion.angle) == len(motion.omega)
         outcomes['read'] += 1
     assert min(outcomes.values()) > 50, outcomes
+
+
+def test_fast_path_gathers_a_chunk_at_once(monkeypatch, tmp_path):
+    """
+    No message-by-message decoding of foreign bags: one gather per chunk and layout.
+
+    Chunks are opened at open time only to find channels the summary does not list:
+    none when it lists them (the mcap library's defaults), the first with message
+    indexes and no channels in the summary, every one with neither.
+    """
+    from cvc_balance.bag import mcap_reader
+    layouts, decoded = [], []
+    one_layout, decode = mcap_reader._one_layout, mcap_reader._decode
+    monkeypatch.setattr(mcap_reader, '_one_layout',
+                        lambda b, o, *rest: layouts.append(len(o)) or one_layout(b, o, *rest))
+    monkeypatch.setattr(mcap_reader, '_decode', lambda c: decoded.append(c) or decode(c))
+    run = make_run(names=('table_joint', 'gantry_joint', 'tilt_joint'))
+    for options, opened in (({'chunk_size': 65536}, 0),
+                            ({'chunk_size': 65536, 'repeat_channels': False}, 1),
+                            ({'chunk_size': 65536, 'index_types': IndexType.NONE}, 0),
+                            ({'chunk_size': 65536, 'index_types': IndexType.NONE,
+                              'repeat_channels': False}, None)):
+        path = tmp_path / 'multi.mcap'
+        write_mcap(path, run, **options)
+        decoded.clear()
+        bag = open_bag(path)
+        assert len(decoded) == (len(bag.chunks) if opened is None else opened), options
+        layouts.clear()
+        motion = joint_samples(bag, bag.channel('joint_states', JOINT_STATE), 'gantry_joint')
+        assert np.array_equal(motion.angle, run.angle)
+        assert len(layouts) == len(bag.chunks) > 10 and sum(layouts) == len(run.stamps)
+    # A second publisher on the topic: two gathers per chunk, none message by message.
+    write_mcap(path, make_run(names=('gantry_joint', 'table_joint'), other=3),
+               chunk_size=65536)
+    bag = open_bag(path)
+    layouts.clear()
+    joint_samples(bag, bag.channel('joint_states', JOINT_STATE), 'gantry_joint')
+    assert len(layouts) == 2 * len(bag.chunks)
