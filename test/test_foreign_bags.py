@@ -676,3 +676,32 @@ def test_fast_path_gathers_a_chunk_at_once(monkeypatch, tmp_path):
     layouts.clear()
     joint_samples(bag, bag.channel('joint_states', JOINT_STATE), 'gantry_joint')
     assert len(layouts) == 2 * len(bag.chunks)
+
+
+def test_speed_only_split_directory_listed_out_of_order(tmp_path):
+    """Float64 speed under a remapped name, split over files listed in reverse: one run."""
+    full = make_run()
+    float64 = 'std_msgs/msg/Float64'
+    events = [e for e in full.events if e[2] == STRING]
+    events += [(int(t), '/drive/speed', float64, cdr(STORE.types[float64](data=w), float64))
+               for t, w in zip(full.stamps, full.omega)]
+    events.sort(key=lambda e: e[0])
+    run = Run(full.stamps, full.angle, full.omega, events)
+    split, single = tmp_path / 'split', tmp_path / 'single.mcap'
+    write_split(split, run)
+    write_mcap(single, run)
+    info = yaml.safe_load((split / 'metadata.yaml').read_text())
+    info['rosbag2_bagfile_information']['relative_file_paths'].reverse()
+    del info['rosbag2_bagfile_information']['files']        # no start times to sort by
+    (split / 'metadata.yaml').write_text(yaml.safe_dump(info))
+    names = InputTopics(speed='/drive/speed')
+    a = replay(split, tmp_path / 'a.mcap', names=names)
+    b = replay(single, tmp_path / 'b.mcap', names=names)
+    assert a.accepted == b.accepted == len(run.stamps) and a.problems == b.problems == []
+    got, want = read_outputs(tmp_path / 'a.mcap'), read_outputs(tmp_path / 'b.mcap')
+    assert got.keys() == want.keys() and len(got) == 5
+    for topic in got:
+        assert np.array_equal(got[topic][0], run.stamps)
+        assert np.array_equal(got[topic][1], want[topic][1]), topic
+    motion, _ = read_inputs(open_bag(split), 'gantry_joint', names)
+    assert np.array_equal(motion.omega, run.omega)
