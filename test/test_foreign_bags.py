@@ -705,3 +705,23 @@ def test_speed_only_split_directory_listed_out_of_order(tmp_path):
         assert np.array_equal(got[topic][1], want[topic][1]), topic
     motion, _ = read_inputs(open_bag(split), 'gantry_joint', names)
     assert np.array_equal(motion.omega, run.omega)
+
+
+def test_directory_of_a_killed_recording(run, tmp_path):
+    """No metadata.yaml, a last file left empty: the whole files are the run, the rest said."""
+    killed = tmp_path / 'killed'
+    killed.mkdir()
+    write_mcap(killed / 'killed_0.mcap', run)
+    (killed / 'killed_1.mcap').write_bytes(b'')
+    summary = replay(killed)
+    assert summary.accepted == len(run.stamps)
+    assert any(p.startswith('no metadata.yaml') for p in summary.problems)
+    assert any(p.startswith('killed_1.mcap: skipped: not an MCAP file') for p in summary.problems)
+    # metadata.yaml with per-file entries that make no sense: the listed order is kept.
+    (killed / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': {
+        'storage_identifier': 'mcap', 'relative_file_paths': ['killed_0.mcap'],
+        'files': [{'path': 'killed_0.mcap', 'starting_time': 'yesterday'}, 7]}}))
+    assert replay(killed).accepted == len(run.stamps)
+    (killed / 'killed_0.mcap').write_bytes(b'')
+    with pytest.raises(BagError, match='no readable bag file'):
+        replay(killed)

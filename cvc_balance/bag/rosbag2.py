@@ -87,8 +87,7 @@ def _open_directory(directory):
         if not files:
             raise BagError(f'{directory}: not a rosbag2 directory (no {METADATA}, no .mcap or '
                            '.db3 file)')
-        parts = [Bag(p) if p.suffix == '.mcap' else RosbagsBag(p) for p in files]
-        return PartsBag(directory, parts, [
+        return _parts_bag(directory, files, [
             f'no {METADATA} (a recording not finished?): read its {len(files)} bag files in '
             'name order'])
     info = _metadata(metadata)
@@ -96,15 +95,27 @@ def _open_directory(directory):
     mode = str(info.get('compression_mode') or '').lower()
     if storage != 'mcap' or mode not in ('', 'none'):
         return RosbagsBag(directory)
-    problems, parts = [], []
+    problems, files = [], []
     for name in _relative_paths(info, metadata):
         part = directory / PurePath(name).name
-        if not part.is_file():
+        if part.is_file():
+            files.append(part)
+        else:
             problems.append(f'{part.name}: listed in {METADATA} but missing')
-            continue
-        parts.append(Bag(part))
+    return _parts_bag(directory, files, problems)
+
+
+def _parts_bag(directory, files, problems):
+    """The files of a directory as one bag; a file that is no bag is said, the rest used."""
+    parts = []
+    for path in files:
+        try:
+            parts.append(Bag(path) if path.suffix != '.db3' else RosbagsBag(path))
+        except BagError as error:
+            problems.append(f'{path.name}: skipped: {str(error).removeprefix(f"{path}: ")}')
     if not parts:
-        raise BagError(f'{directory}: none of the files {METADATA} lists is there')
+        raise BagError(f'{directory}: no readable bag file'
+                       + (f' ({problems[-1]})' if problems else ''))
     return PartsBag(directory, parts, problems)
 
 
@@ -125,8 +136,11 @@ def _relative_paths(info, path):
             not all(isinstance(n, str) and n for n in names):
         raise BagError(f'{path}: relative_file_paths must list the bag\'s files')
     # Split files in the order of their first messages, where metadata.yaml says it.
-    starts = {PurePath(f.get('path', '')).name: f.get('starting_time', {}).get(
-        'nanoseconds_since_epoch') for f in info.get('files') or () if isinstance(f, dict)}
+    files = info.get('files')
+    starts = {str(f.get('path')): f.get('starting_time') for f in files
+              if isinstance(f, dict)} if isinstance(files, list) else {}
+    starts = {PurePath(name).name: start.get('nanoseconds_since_epoch')
+              for name, start in starts.items() if isinstance(start, dict)}
     if all(isinstance(starts.get(PurePath(n).name), int) for n in names):
         names = sorted(names, key=lambda n: starts[PurePath(n).name])
     return names
