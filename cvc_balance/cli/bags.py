@@ -64,8 +64,8 @@ def register(commands):
     play.add_argument('bag', metavar='BAG', help=BAG_HELP)
     play.add_argument('--rate', type=finite, default=1.0, metavar='X',
                       help='playback speed factor (default 1)')
-    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs to this bag: '
-                      + OUTPUT_BAG_HELP)
+    play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs to '
+                      'this bag: a .mcap file, or a rosbag2 directory for any other name')
     add_input_topics(play)
     play.set_defaults(run=_play)
 
