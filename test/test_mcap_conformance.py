@@ -83,3 +83,55 @@ def test_log_times_out_of_file_order_stay_in_file_order():
     bag = Bag(path)
     (channel,) = bag.channels.values()
     assert [t for t, _ in bag.messages(channel)] == [0, 2, 1, 3, 3, 5, 4, 7, 8, 9]
+
+
+def test_unknown_records_are_skipped_at_the_top_level_and_in_chunks(tmp_path):
+    """
+    Records of kinds the reader does not know (0x42, user opcode 0x80) are skipped by length.
+
+    The file is built here from the specification's record layouts; the mcap library's
+    own reader, which also skips unknown records, finds the same ten messages.
+    """
+    import struct
+    import zlib
+    from mcap.reader import make_reader
+
+    def record(opcode, body):
+        return struct.pack('<BQ', opcode, len(body)) + body
+
+    def text(value):
+        return struct.pack('<I', len(value)) + value.encode()
+
+    unknown = record(0x42, b'\x01\x02\x03') + record(0x80, b'user data')
+    chunk, offsets = bytearray(), []
+    chunk += record(0x03, struct.pack('<H', 1) + text('Example') + text('c') +
+                    struct.pack('<I', 3) + b'\x04\x05\x06')
+    chunk += unknown
+    chunk += record(0x04, struct.pack('<HH', 1, 1) + text('example') + text('a') +
+                    struct.pack('<I', 0))
+    for i in range(10):
+        offsets.append(len(chunk))
+        chunk += record(0x05, struct.pack('<HIQQ', 1, i, 100 + i, 100 + i) + bytes([i] * 5))
+        if i == 4:
+            chunk += unknown
+    data = bytearray(b'\x89MCAP0\r\n')
+    data += record(0x01, text('') + text(''))
+    data += unknown
+    data += record(0x06, struct.pack('<QQQI', 100, 109, len(chunk), zlib.crc32(chunk)) +
+                   text('') + struct.pack('<Q', len(chunk)) + chunk)
+    data += unknown
+    entries = b''.join(struct.pack('<QQ', 100 + i, o) for i, o in enumerate(offsets))
+    data += record(0x07, struct.pack('<HI', 1, len(entries)) + entries)
+    data += unknown
+    data += record(0x0F, struct.pack('<I', 0))
+    data += unknown
+    data += record(0x02, struct.pack('<QQI', 0, 0, 0)) + b'\x89MCAP0\r\n'
+    path = tmp_path / 'unknown.mcap'
+    path.write_bytes(bytes(data))
+    with open(path, 'rb') as stream:
+        theirs = [(m.log_time, m.data) for _, _, m in make_reader(stream).iter_messages()]
+    bag = Bag(path)
+    assert bag.problems == [] and bag.topics() == {'example': 'Example'}
+    ours = bag.messages(bag.channels[1])
+    assert ours == theirs == [(100 + i, bytes([i] * 5)) for i in range(10)]
+    assert bag.chunks[0].indexes is not None and not bag.chunks[0].walked  # index kept

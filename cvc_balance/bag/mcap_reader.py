@@ -41,7 +41,7 @@ except ImportError:                                  # pragma: no cover
     from zlib import crc32
 
 MAGIC = b'\x89MCAP0\r\n'
-OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
 OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
 MESSAGE_HEADER = 31
 """Bytes of a message record before its data: opcode, length, channel, sequence, times."""
@@ -217,6 +217,8 @@ class Bag:
             if length >= MESSAGE_HEADER - 9:
                 channel_id, = struct.unpack_from('<H', data, start)
                 self._loose.append((channel_id, start - 9))
+        elif not OP_HEADER <= opcode <= OP_DATA_END:
+            return indexing        # a kind this reader does not know: skipped, nothing ends
         return None
 
     def _summary_record(self, opcode, start):
