@@ -106,7 +106,7 @@ def _open_directory(directory):
 
 
 def _parts_bag(directory, files, problems):
-    """The files of a directory as one bag; a file that is no bag is said, the rest used."""
+    """Read the files of a directory as one bag; a file that is no bag is said, the rest used."""
     parts = []
     for path in files:
         try:
