@@ -31,7 +31,9 @@ def test_play_a_split_namespaced_directory_through_the_node(tmp_path):
     run = make_run(prefix='/gantry')
     bag = tmp_path / 'split'
     write_split(bag, run)
-    node = NodeProcess('cvc_balance.ros.balance_monitor', [], tmp_path / 'node.log')
+    own = tmp_path / 'node_run'                   # the node's own recording, a directory too
+    node = NodeProcess('cvc_balance.ros.balance_monitor', ['-p', f'record_path:={own}'],
+                       tmp_path / 'node.log')
     live = tmp_path / 'live'                      # recorded as a rosbag2 directory
     played = subprocess.run(CLI + ['play', str(bag), '--joint-states', '/gantry/joint_states',
                                    '--layout', '/gantry/layout', '-o', str(live)],
@@ -51,6 +53,13 @@ def test_play_a_split_namespaced_directory_through_the_node(tmp_path):
         scale = np.abs(values).max()
         # Measured 2.3e-13 (drive torque: alpha by two estimator implementations).
         assert np.abs(got[topic][1] - values).max() <= 1e-12 * scale, topic
+    recorded = read_outputs(own)                  # the mcap library's reader, CRCs validated
+    with Rosbag2Reader(own) as reader:
+        assert reader.message_count == sum(
+            1 for _ in reader.messages())
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts['/joint_states'] == counts['/bearing_load'] == summary.accepted
+    assert np.array_equal(recorded['/bearing_load'][0], expected['/bearing_load'][0])
 
 
 def test_record_to_a_rosbag2_directory(tmp_path):
