@@ -13,7 +13,13 @@ simulation, then times in the same process:
   touches for the first time is slow on some virtual machines (a first run pays for
   its buffers and for the page cache of its output), so both are printed.
 
-Run: ./dev.sh run python benchmarks/replay_throughput.py [--samples 1000000]
+Then the same run as others write it, each against rosbags reading that same bag in the same
+run: a bag written by the ``mcap`` library's writer (``mcap.writer.Writer`` defaults: zstd
+chunks of 1 MiB, Schema and Channel records inside the chunks, summary), and a rosbag2
+directory split in three MCAP files (each written by rosbags' rosbag2 Writer, gathered with a
+metadata.yaml as ``ros2 bag record --max-bag-duration`` leaves them).
+
+Run: ./dev.sh run python benchmarks/replay_throughput.py [--samples 1000000] [--foreign-only]
 """
 
 import argparse
@@ -46,6 +52,71 @@ def make_bag(samples, folder):
     return bag, count
 
 
+def foreign_messages(bag):
+    """Every message of the project's bag as (log time, topic, type, CDR), in log-time order."""
+    from cvc_balance.bag.mcap_reader import Bag
+    own = Bag(bag)
+    messages = [(t, c.topic, c.msg_type, data) for c in own.channels.values()
+                for t, data in own.messages(c)]
+    return sorted(messages, key=lambda m: m[0])
+
+
+def write_with_mcap_library(messages, path):
+    """Write the run as the mcap library's writer makes it (its defaults), schemas from rosbags."""
+    from mcap.writer import Writer
+    from rosbags.typesys import get_typestore, Stores
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='benchmark')
+        channels = {}
+        for log_time, topic, msg_type, data in messages:
+            if topic not in channels:
+                text = store.generate_msgdef(msg_type, ros_version=2)[0]
+                schema = writer.register_schema(msg_type, 'ros2msg', text.encode())
+                channels[topic] = writer.register_channel(topic, 'cdr', schema)
+            writer.add_message(channels[topic], log_time, data, log_time)
+        writer.finish()
+    return path
+
+
+def write_split_directory(messages, path, parts=3):
+    """Write the run split in ``parts`` MCAP files of one rosbag2 directory (rosbags' Writer)."""
+    import shutil
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import get_typestore, Stores
+    store = get_typestore(Stores.ROS2_JAZZY)
+    path.mkdir()
+    infos, size = [], -(-len(messages) // parts)
+    for i in range(parts):
+        part = path.parent / f'{path.name}_part{i}'
+        with Writer(part, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            connections = {}
+            for log_time, topic, msg_type, data in messages[i * size:(i + 1) * size]:
+                if topic not in connections:
+                    connections[topic] = writer.add_connection(topic, msg_type, typestore=store)
+                writer.write(connections[topic], log_time, data)
+        info = yaml.safe_load((part / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        name = f'{path.name}_{i}.mcap'
+        shutil.move(part / info['relative_file_paths'][0], path / name)
+        shutil.rmtree(part)
+        info['files'][0]['path'] = name
+        infos.append(info)
+    merged = dict(infos[0], relative_file_paths=[i['files'][0]['path'] for i in infos],
+                  files=[i['files'][0] for i in infos],
+                  message_count=sum(i['message_count'] for i in infos))
+    counts = {}
+    for info in infos:
+        for topic in info['topics_with_message_count']:
+            entry = counts.setdefault(topic['topic_metadata']['name'],
+                                      {'topic_metadata': topic['topic_metadata'],
+                                       'message_count': 0})
+            entry['message_count'] += topic['message_count']
+    merged['topics_with_message_count'] = list(counts.values())
+    (path / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': merged}))
+    return path
+
+
 def read_with_rosbags(bag):
     """Iterate and deserialise every message with rosbags; return the count."""
     from rosbags.highlevel import AnyReader
@@ -57,20 +128,10 @@ def read_with_rosbags(bag):
     return count
 
 
-def main():
-    """Print the figures."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--samples', type=int, default=1_000_000)
-    args = parser.parse_args()
-    folder = Path(tempfile.mkdtemp(prefix='cvc_replay_bench_'))
-    bag, samples = make_bag(args.samples, folder)
-    print(f'bag: {samples} samples, {bag.stat().st_size / 1e6:.1f} MB ({bag})')
-    start = time.perf_counter()
-    messages = read_with_rosbags(bag)
-    rosbags_s = time.perf_counter() - start
-    print(f'rosbags read + deserialise: {messages} messages in {rosbags_s:.2f} s '
-          f'({samples / rosbags_s / 1e6:.3f} M samples/s)')
-    for name, compression in CONFIGURATIONS:
+def time_replays(bag, rosbags_s, configurations):
+    """Print replay's time for each configuration, first run and repeat."""
+    folder = Path(bag).parent
+    for name, compression in configurations:
         out = folder / f'out_{name.replace(" ", "_")}.mcap' if compression is not None else None
         what = 'read + compute' + (f' + write, {name}' if out else ' (no output)')
         for run in ('first', 'repeat'):
@@ -83,6 +144,39 @@ def main():
                   f'{rosbags_s / seconds:.1f}x rosbags reading){size}')
             if out:
                 out.unlink()
+
+
+def time_rosbags(bag, samples, what):
+    """Time rosbags reading ``bag``; print and return the seconds."""
+    start = time.perf_counter()
+    messages = read_with_rosbags(bag)
+    seconds = time.perf_counter() - start
+    print(f'rosbags read + deserialise, {what}: {messages} messages in {seconds:.2f} s '
+          f'({samples / seconds / 1e6:.3f} M samples/s)')
+    return seconds
+
+
+def main():
+    """Print the figures."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    parser.add_argument('--samples', type=int, default=1_000_000)
+    parser.add_argument('--foreign-only', action='store_true',
+                        help='only the bags written by the mcap library and rosbags')
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp(prefix='cvc_replay_bench_'))
+    bag, samples = make_bag(args.samples, folder)
+    print(f'bag: {samples} samples, {bag.stat().st_size / 1e6:.1f} MB ({bag})')
+    if not args.foreign_only:
+        time_replays(bag, time_rosbags(bag, samples, "the project's bag"), CONFIGURATIONS)
+    messages = foreign_messages(bag)
+    foreign = (('mcap library bag', write_with_mcap_library(messages, folder / 'mcap_lib.mcap')),
+               ('split rosbag2 directory', write_split_directory(messages, folder / 'split')))
+    del messages
+    for what, path in foreign:
+        size = sum(p.stat().st_size for p in ([path] if path.is_file() else path.iterdir()))
+        print(f'{what}: {size / 1e6:.1f} MB ({path})')
+        time_replays(path, time_rosbags(path, samples, what),
+                     [c for c in CONFIGURATIONS if c[0] in ('zstd', 'no output')])
 
 
 if __name__ == '__main__':

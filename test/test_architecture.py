@@ -34,7 +34,7 @@ THIRD_PARTY = {
     'identify': {'numpy'},
     'messages': {'ament_index_python'},
     'design': {'numpy', 'scipy', 'yaml', 'matplotlib'},   # matplotlib in design/charts only
-    'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
+    'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal', 'rosbags'},
     'view': {'numpy', 'rerun'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
 }

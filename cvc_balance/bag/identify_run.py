@@ -13,8 +13,9 @@ import math
 
 import numpy as np
 
-from cvc_balance.bag.mcap_reader import Bag, wrench_samples
+from cvc_balance.bag.mcap_reader import wrench_samples
 from cvc_balance.bag.replay import layout_events, read_inputs
+from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.identify import (CellReadings, fit, identified_unbalance, layout_unbalance,
                                   Motion, residual)
 from cvc_balance.messages import topics
@@ -52,15 +53,17 @@ def cell_readings(bag, supports):
 
 
 def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_revs=None,
-                 time_constant=0.1, max_speed=1000.0):
+                 time_constant=0.1, max_speed=1000.0, names=None):
     """
     Identify each layout segment of ``bag_path``; return ([IdentifiedSegment], problems).
 
-    ``window_revs``: fit only the last that many revolutions of each segment (the state
-    at its end, as the live node reports it); default the whole segment.
+    ``bag_path``: a bag file or rosbag2 directory; ``names`` its input topics if not the
+    node's (:class:`cvc_balance.bag.inputs.InputTopics`); ``window_revs``: fit only the
+    last that many revolutions of each segment (the state at its end, as the live node
+    reports it); default the whole segment.
     """
-    bag = Bag(bag_path)
-    motion, layout_messages = read_inputs(bag, joint_name)
+    bag = open_bag(bag_path)
+    motion, layout_messages = read_inputs(bag, joint_name, names)
     events, problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
     accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)

@@ -1,12 +1,26 @@
 """
-Read MCAP bags fast and forgivingly: whole chunks parsed with numpy.
+Read MCAP files fast and forgivingly: whole chunks parsed with numpy.
 
-The top-level records are walked once (a few per chunk); a file that ends
-inside a record (a recording killed mid-chunk) or a chunk that does not
-decompress is reported in ``Bag.problems`` and the rest is still used.
-Messages of a channel are located through the message indexes written after
-each chunk (or, without them, by walking the chunk's records), and fields of
-fixed-layout messages are gathered for all messages of a chunk at once.
+Any valid MCAP (the specification's read-conformance files are a test): Schema
+and Channel records at the top level, inside chunks or repeated in the summary;
+chunks compressed with zstd, lz4 or not at all, or no chunks; with or without
+message indexes, chunk indexes, statistics, summary and summary offsets;
+records longer than the fields this reader knows (padding) and record kinds it
+does not know are skipped by their length, as the specification asks.
+
+The top-level records are walked once (a few per chunk). Channels come from the
+top level and the summary; a chunk is opened to look for them only when the
+summary lists none and the chunk may hold one not yet known (no message index,
+or one naming an unknown channel). Messages of a channel are located through
+the message indexes written after each chunk or, without them, by walking the
+chunk's records in runs of equal records (a fixed-layout stream takes a few
+numpy steps per chunk); fields of fixed-layout messages are then gathered for
+all messages of a chunk at once.
+
+A file that ends inside a record (a recording killed mid-chunk), a chunk that
+does not decompress or fails its CRC, a message index that does not point at
+its channel's messages: each is reported in ``Bag.problems`` and the rest is
+still used.
 """
 
 from collections import deque
@@ -18,7 +32,8 @@ import threading
 
 import numpy as np
 
-from cvc_balance.messages.cdr import ENCAPSULATION_LE, find_joint_state_fields, read_string_message
+from cvc_balance.messages.cdr import (find_joint_state_fields, joint_state_names,
+                                      read_string_message)
 
 try:    # ISA-L's CRC-32 (zlib's polynomial) runs ~15 times faster than zlib's here
     from isal.isal_zlib import crc32
@@ -26,11 +41,13 @@ except ImportError:                                  # pragma: no cover
     from zlib import crc32
 
 MAGIC = b'\x89MCAP0\r\n'
-OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
 OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
 MESSAGE_HEADER = 31
+"""Bytes of a message record before its data: opcode, length, channel, sequence, times."""
 AHEAD = 4
 """Chunks decompressed ahead of the one being parsed."""
+_RECORD = struct.Struct('<BQ')
 _U64 = struct.Struct('<Q')
 _local = threading.local()   # a decompressor per thread
 
@@ -41,24 +58,64 @@ class BagError(ValueError):
 
 @dataclass
 class ChannelInfo:
-    """A channel of the bag: topic, message type, encoding."""
+    """A channel of the bag: topic, message type (its schema's name), encoding."""
 
     id: int
     topic: str
     msg_type: str
     encoding: str
+    schema_id: int = 0
 
 
 @dataclass
 class ChunkInfo:
-    """A chunk's place in the file and its message indexes (channel -> offsets)."""
+    """
+    A chunk's place in the file and where its messages are.
+
+    ``indexes`` maps a channel id to the offsets of its message records in the
+    decompressed records: from the message indexes after the chunk, or from a
+    walk of its records (``walked``); None while unknown.
+    """
 
     offset: int
     compression: str
     data: memoryview
     uncompressed_size: int
     crc: int
-    indexes: dict = field(default_factory=dict)
+    indexes: dict = None
+    walked: bool = False
+
+
+def select_channel(channels, topic, msg_type, where, option=None, exact=False):
+    """
+    Return the channel of ``channels`` (ChannelInfo-like values) for ``topic``, or None.
+
+    ``topic`` is a name, with or without its leading '/'. ``exact``: only that
+    topic (one the user named); else a namespaced or remapped topic ending in
+    it (``/gantry/joint_states``) also matches if no topic has the name itself
+    and exactly one ends in it. Several matches, or a match of another type than
+    ``msg_type``, is a :class:`BagError` naming the bag's topics (and ``option``,
+    the command-line option that chooses one).
+    """
+    wanted = topic.strip('/')
+    found = [c for c in channels if c.topic.strip('/') == wanted]
+    if not found and not exact:
+        found = [c for c in channels if c.topic.endswith('/' + wanted)]
+    names = {c.topic for c in found}
+    if len(names) > 1:
+        raise BagError(f'{where}: several topics match {topic}: {", ".join(sorted(names))}; '
+                       f'choose one{f" with {option}" if option else ""}')
+    for c in found:
+        if c.msg_type != msg_type:
+            raise BagError(f'{where}: topic {c.topic} has type {c.msg_type or "(none)"}, '
+                           f'expected {msg_type}; the bag has: {describe_topics(channels)}')
+    return found[0] if found else None
+
+
+def describe_topics(channels):
+    """Return 'topic (type), ...' of ``channels``, sorted, or 'none'."""
+    found = sorted({(c.topic, c.msg_type or '(no schema)') for c in channels})
+    return ', '.join(f'{t} ({m})' for t, m in found) or 'none'
 
 
 class Bag:
@@ -77,9 +134,14 @@ class Bag:
             raise BagError(f'{self.path}: cannot read bag: {error.strerror}') from None
         self.problems = []
         self.schemas, self.channels, self.chunks = {}, {}, []
-        self._loose = []         # (channel, offset in file) of messages outside chunks
+        self._loose = []           # (channel, offset in file) of messages outside chunks
         self._unreadable = set()   # chunks already reported
+        self._summary_channels = False
         self._walk()
+        self._find_channels_in_chunks()
+        for channel in self.channels.values():    # a schema may come after its channel
+            if not channel.msg_type:
+                channel.msg_type = self.schemas.get(channel.schema_id, '')
 
     # -- structure -------------------------------------------------------------------
 
@@ -87,77 +149,162 @@ class Bag:
         data = self._bytes
         if data[:8] != MAGIC:
             raise BagError(f'{self.path}: not an MCAP file (no MCAP magic at the start)')
-        position, size, finished = 8, len(data), False
+        position, size = 8, len(data)
+        data_end = finished = False
+        indexing = None   # the chunk that message index records now follow
         while position < size:
             if position + 9 > size:
-                self.problems.append(f'file ends inside a record header at byte {position} '
-                                     '(truncated recording?)')
+                self._ended(data_end, f'file ends inside a record header at byte {position}')
                 break
-            opcode, length = struct.unpack_from('<BQ', data, position)
+            opcode, length = _RECORD.unpack_from(data, position)
             start = position + 9
             if start + length > size:
-                self.problems.append(f'file ends inside a record (opcode 0x{opcode:02x}) '
-                                     f'at byte {position} of {size} (truncated recording?)')
+                self._ended(data_end, f'file ends inside a record (opcode 0x{opcode:02x}) at '
+                            f'byte {position} of {size}')
                 break
             try:
-                self._record(opcode, start, length)
+                if data_end:
+                    self._summary_record(opcode, start)
+                else:
+                    indexing = self._record(opcode, start, length, indexing)
             except (struct.error, UnicodeDecodeError, ValueError) as error:
-                self.problems.append(f'corrupt record (opcode 0x{opcode:02x}) at byte '
+                part = 'summary' if data_end else 'record'
+                self.problems.append(f'corrupt {part} (opcode 0x{opcode:02x}) at byte '
                                      f'{position}: {error}; stopped reading there')
-                break
-            position = start + length
-            if opcode in (OP_DATA_END, OP_FOOTER):
                 finished = True
                 break
-        if not finished and not self.problems:
+            position = start + length
+            if opcode == OP_FOOTER:
+                finished = True
+                break
+            data_end = data_end or opcode == OP_DATA_END
+        if not finished and not data_end and not self.problems:
             self.problems.append('file has no end of data (truncated recording?)')
 
-    def _record(self, opcode, start, length):
+    def _ended(self, data_end, where):
+        if data_end:
+            self.problems.append(f'{where}, in its summary (every message was read)')
+        else:
+            self.problems.append(f'{where} (truncated recording?)')
+
+    def _record(self, opcode, start, length, indexing):
+        """Take one data-section record; return the chunk later message indexes belong to."""
         data = self._bytes
-        if opcode == OP_SCHEMA:
-            schema_id, = struct.unpack_from('<H', data, start)
-            name, position = _string(data, start + 2)
-            self.schemas[schema_id] = name
-        elif opcode == OP_CHANNEL:
-            channel_id, schema_id = struct.unpack_from('<HH', data, start)
-            topic, position = _string(data, start + 4)
-            encoding, position = _string(data, position)
-            self.channels[channel_id] = ChannelInfo(channel_id, topic,
-                                                    self.schemas.get(schema_id, ''), encoding)
+        if opcode in (OP_SCHEMA, OP_CHANNEL):
+            self._definition(data, opcode, start)
         elif opcode == OP_CHUNK:
-            position = start + 8 + 8
-            size, crc = struct.unpack_from('<QI', data, position)
-            compression, position = _string(data, position + 12)
-            records_length, = struct.unpack_from('<Q', data, position)
-            records = memoryview(data)[position + 8:position + 8 + records_length]
+            size, crc = struct.unpack_from('<QI', data, start + 16)
+            compression, position = _string(data, start + 28)
+            records_length, = _U64.unpack_from(data, position)
             if position + 8 + records_length > start + length:
                 raise ValueError('chunk data beyond its record')
+            records = memoryview(data)[position + 8:position + 8 + records_length]
             self.chunks.append(ChunkInfo(start - 9, compression, records, size, crc))
-        elif opcode == OP_MESSAGE_INDEX and self.chunks:
+            return self.chunks[-1]
+        elif opcode == OP_MESSAGE_INDEX and indexing is not None:
             channel_id, body = struct.unpack_from('<HI', data, start)
+            if body % 16 or 6 + body > length:
+                raise ValueError('message index entries beyond its record')
             pairs = np.frombuffer(data, dtype=[('t', '<u8'), ('o', '<u8')], count=body // 16,
                                   offset=start + 6)
-            self.chunks[-1].indexes[channel_id] = pairs['o']
+            indexes = indexing.indexes = indexing.indexes or {}
+            offsets = pairs['o']
+            if channel_id in indexes:
+                offsets = np.concatenate([indexes[channel_id], offsets])
+            indexes[channel_id] = offsets
+            return indexing
         elif opcode == OP_MESSAGE:
-            channel_id, = struct.unpack_from('<H', data, start)
-            self._loose.append((channel_id, start - 9))
+            if length >= MESSAGE_HEADER - 9:
+                channel_id, = struct.unpack_from('<H', data, start)
+                self._loose.append((channel_id, start - 9))
+        elif not OP_HEADER <= opcode <= OP_DATA_END:
+            return indexing        # a kind this reader does not know: skipped, nothing ends
+        return None
+
+    def _summary_record(self, opcode, start):
+        if opcode in (OP_SCHEMA, OP_CHANNEL):
+            self._definition(self._bytes, opcode, start)
+            self._summary_channels |= opcode == OP_CHANNEL
+
+    def _definition(self, data, opcode, start):
+        """Register a Schema or Channel record starting (after its opcode and length) here."""
+        if opcode == OP_SCHEMA:
+            schema_id, = struct.unpack_from('<H', data, start)
+            name, _ = _string(data, start + 2)
+            if schema_id:                            # 0: no schema, by the specification
+                self.schemas[schema_id] = name
+            return
+        channel_id, schema_id = struct.unpack_from('<HH', data, start)
+        topic, position = _string(data, start + 4)
+        encoding, _ = _string(data, position)
+        self.channels[channel_id] = ChannelInfo(channel_id, topic,
+                                                self.schemas.get(schema_id, ''), encoding,
+                                                schema_id)
+
+    def _find_channels_in_chunks(self):
+        """
+        Open the chunks that may define channels or schemas not known yet.
+
+        Those whose message indexes name an unknown channel, and without a channel
+        list in the summary those without message indexes too; then, while a
+        channel's schema is still unknown (channels repeated in the summary, their
+        schemas not), the others in order until it is found.
+        """
+        known, numbers = set(self.channels), []
+        for n, chunk in enumerate(self.chunks):
+            if (chunk.indexes is None and not self._summary_channels) or \
+                    set(chunk.indexes or ()) - known:
+                numbers.append(n)
+                known |= set(chunk.indexes or ())
+        opened = set(numbers)
+        for number, records in self._decoded_chunks(numbers):
+            if records is not None:
+                self._walk_chunk(number, records)
+        if not self._missing_schemas():
+            return
+        for number, records in self._decoded_chunks(
+                n for n in range(len(self.chunks)) if n not in opened):
+            if records is not None:
+                self._walk_chunk(number, records)
+                if not self._missing_schemas():
+                    return
+
+    def _missing_schemas(self):
+        return {c.schema_id for c in self.channels.values()} - set(self.schemas) - {0}
+
+    def _walk_chunk(self, number, records):
+        """Walk a chunk's records: register its schemas and channels, index its messages."""
+        chunk = self.chunks[number]
+        buffer = np.frombuffer(records, dtype=np.uint8)
+        offsets, opcodes, lengths, end = record_table(buffer)
+        if end != len(buffer):
+            self.problems.append(f'chunk at byte {chunk.offset}: a record runs past the '
+                                 f'chunk\'s end at byte {end} of its {len(buffer)}; the rest '
+                                 'of the chunk skipped')
+        for offset, opcode in zip(offsets.tolist(), opcodes.tolist()):
+            if opcode in (OP_SCHEMA, OP_CHANNEL):
+                try:
+                    self._definition(records, opcode, offset + 9)
+                except (struct.error, UnicodeDecodeError, ValueError) as error:
+                    self.problems.append(f'chunk at byte {chunk.offset}: corrupt record '
+                                         f'(opcode 0x{opcode}) at {offset}: {error}; skipped')
+        if chunk.indexes is None or chunk.walked:
+            messages = offsets[(opcodes == OP_MESSAGE) & (lengths >= MESSAGE_HEADER - 9)]
+            channel = column(buffer, messages + 9, '<u2')
+            chunk.indexes = {int(c): messages[channel == c] for c in np.unique(channel)}
+            chunk.walked = True
+
+    def note(self, problem):
+        """Report a problem found while reading."""
+        self.problems.append(problem)
 
     def topics(self):
         """Return {topic: message type} of the bag's channels."""
         return {c.topic: c.msg_type for c in self.channels.values()}
 
-    def channel(self, topic, msg_type):
-        """Return the channel of ``topic`` (a name or its last part) with ``msg_type``."""
-        wanted = topic.strip('/')
-        found = [c for c in self.channels.values()
-                 if c.topic.strip('/') == wanted or c.topic.endswith('/' + wanted)]
-        if not found:
-            return None
-        for c in found:
-            if c.msg_type != msg_type:
-                raise BagError(f'{self.path}: topic {c.topic} has type {c.msg_type}, '
-                               f'expected {msg_type}')
-        return found[0]
+    def channel(self, topic, msg_type, option=None, exact=False):
+        """Return the channel of ``topic`` with ``msg_type`` (see :func:`select_channel`)."""
+        return select_channel(self.channels.values(), topic, msg_type, self.path, option, exact)
 
     # -- message access ----------------------------------------------------------------
 
@@ -187,44 +334,58 @@ class Bag:
             yield number, records
 
     def message_offsets(self, channel):
-        """Yield (records as uint8 array, offsets of this channel's message records)."""
-        # Indexed chunks without messages of this channel are not even decompressed.
+        """
+        Yield (records as uint8 array, offsets of this channel's message records), in file order.
+
+        Chunks whose message indexes lack the channel are not even decompressed;
+        messages outside chunks come with the whole file as their records.
+        """
+        loose = np.array([o for c, o in self._loose if c == channel.id], dtype=np.int64)
         wanted = [number for number, chunk in enumerate(self.chunks)
-                  if channel.id in chunk.indexes or not chunk.indexes]
+                  if chunk.indexes is None or channel.id in chunk.indexes]
         for number, records in self._decoded_chunks(wanted):
             chunk = self.chunks[number]
+            before = int(np.searchsorted(loose, chunk.offset))
+            if before:
+                yield np.frombuffer(self._bytes, dtype=np.uint8), loose[:before]
+                loose = loose[before:]
             if records is None:
                 continue
+            if chunk.indexes is None:
+                self._walk_chunk(number, records)
             buffer = np.frombuffer(records, dtype=np.uint8)
             offsets = chunk.indexes.get(channel.id)
-            if offsets is None:
-                offsets = _walk_chunk(records, channel.id)
-            if len(offsets) and int(offsets.max()) + MESSAGE_HEADER > len(records):
-                self.problems.append(f'chunk at byte {chunk.offset}: message index beyond the '
-                                     'chunk; skipped')
+            if offsets is None or not len(offsets):
                 continue
-            if len(offsets):
-                yield buffer, offsets.astype(np.int64)
-        if self._loose:
-            buffer = np.frombuffer(self._bytes, dtype=np.uint8)
-            offsets = np.array([o for c, o in self._loose if c == channel.id], dtype=np.int64)
-            if len(offsets):
-                yield buffer, offsets
+            offsets = offsets.astype(np.int64)
+            if not chunk.walked and not _points_at_messages(buffer, offsets, channel.id):
+                self.problems.append(f'chunk at byte {chunk.offset}: message index of '
+                                     f'{channel.topic} does not point at its messages; chunk '
+                                     'walked instead')
+                chunk.walked = True
+                self._walk_chunk(number, records)
+                offsets = chunk.indexes.get(channel.id, np.zeros(0, np.int64))
+                if not len(offsets):
+                    continue
+            yield buffer, offsets
+        if len(loose):
+            yield np.frombuffer(self._bytes, dtype=np.uint8), loose
 
     def message_count(self, channel):
-        """Return the number of messages of ``channel`` the message indexes list."""
-        return sum(len(chunk.indexes.get(channel.id, ())) for chunk in self.chunks) + \
+        """Return the number of messages of ``channel`` known before reading (indexes, loose)."""
+        return sum(len(chunk.indexes.get(channel.id, ())) for chunk in self.chunks
+                   if chunk.indexes is not None) + \
             sum(1 for c, _ in self._loose if c == channel.id)
 
     def messages(self, channel):
         """Return [(log time ns, bytes)] of a channel, in file order (for few messages)."""
         out = []
         for buffer, offsets in self.message_offsets(channel):
-            data = buffer.tobytes()          # once per chunk, then plain slices
-            for offset in offsets.tolist():
-                (length,), (log_time,) = (_U64.unpack_from(data, offset + 1),
-                                          _U64.unpack_from(data, offset + 15))
-                out.append((log_time, data[offset + MESSAGE_HEADER:offset + 9 + length]))
+            lengths = column(buffer, offsets + 1, '<u8').tolist()
+            times = column(buffer, offsets + 15, '<u8').tolist()
+            for offset, length, log_time in zip(offsets.tolist(), lengths, times):
+                out.append((log_time, buffer[offset + MESSAGE_HEADER:offset + 9 + length]
+                            .tobytes()))
         return out
 
 
@@ -255,19 +416,71 @@ def _decode(chunk):
 
 def _string(data, position):
     length, = struct.unpack_from('<I', data, position)
+    if position + 4 + length > len(data):
+        raise ValueError('string beyond the record')
     return bytes(data[position + 4:position + 4 + length]).decode('utf-8'), position + 4 + length
 
 
-def _walk_chunk(records, channel_id):
-    """Offsets of a channel's message records in a chunk without message indexes."""
-    offsets, position = [], 0
-    while position + 9 <= len(records):
-        opcode, length = struct.unpack_from('<BQ', records, position)
-        if opcode == OP_MESSAGE and struct.unpack_from('<H', records, position + 9)[0] == \
-                channel_id:
-            offsets.append(position)
-        position += 9 + length
-    return np.array(offsets, dtype=np.int64)
+def _points_at_messages(buffer, offsets, channel_id):
+    """Whether every offset is a whole message record of ``channel_id`` in ``buffer``."""
+    if int(offsets.min()) < 0 or int(offsets.max()) + MESSAGE_HEADER > len(buffer):
+        return False
+    lengths = column(buffer, offsets + 1, '<u8')
+    return bool(np.all(column(buffer, offsets, 'u1') == OP_MESSAGE) and
+                np.all(column(buffer, offsets + 9, '<u2') == channel_id) and
+                np.all(lengths >= MESSAGE_HEADER - 9) and
+                np.all(lengths <= len(buffer) - 9 - offsets))
+
+
+def record_table(buffer):
+    """
+    Return (offsets, opcodes, lengths, end) of the records in ``buffer`` (uint8).
+
+    Walked in runs: where the next record has the opcode and length of this one,
+    the following ones are checked a growing block at a time through strided
+    views, so a chunk of equal records takes a few numpy steps; other records
+    one by one. ``end`` is where the walk stopped: ``len(buffer)`` unless a
+    record runs past the end.
+    """
+    size, position = len(buffer), 0
+    runs = []       # (start, step, count, opcode, length)
+    while position + 9 <= size:
+        opcode, length = _RECORD.unpack_from(buffer, position)
+        step = 9 + length
+        if position + step > size:
+            break
+        count = 1
+        following = position + step
+        if following + step <= size and _RECORD.unpack_from(buffer, following) == \
+                (opcode, length):
+            count = _run(buffer, position, step, opcode, length)
+        runs.append((position, step, count, opcode, length))
+        position += step * count
+    if not runs:
+        empty = np.zeros(0, np.int64)
+        return empty, np.zeros(0, np.uint8), empty, position
+    start, step, count, opcode, length = (np.array(c, dtype=np.int64) for c in zip(*runs))
+    first = np.repeat(np.cumsum(count) - count, count)
+    index = np.arange(int(count.sum()), dtype=np.int64) - first
+    offsets = np.repeat(start, count) + index * np.repeat(step, count)
+    return (offsets, np.repeat(opcode, count).astype(np.uint8), np.repeat(length, count),
+            position)
+
+
+def _run(buffer, position, step, opcode, length):
+    """Return how many records from ``position`` on share ``opcode`` and ``length``."""
+    fitting = (len(buffer) - position) // step     # records of this size that fit
+    count, block = 2, 16
+    while count < fitting:
+        n = min(block, fitting - count)
+        at = position + step * count
+        same = (np.ndarray((n,), np.uint8, buffer, at, (step,)) == opcode) & \
+            (np.ndarray((n,), '<u8', buffer, at + 1, (step,)) == length)
+        if not same.all():
+            return count + int(np.argmin(same))
+        count += n
+        block *= 4
+    return count
 
 
 def _stride(at):
@@ -280,52 +493,58 @@ def _stride(at):
     return None
 
 
-def alike(buffer, at, spans):
+def matching(buffer, at, spans):
     """
-    Whether bytes ``spans`` ((start, stop) pairs) after each position ``at`` match the first's.
+    Which positions ``at`` have, in each span ((start, stop) after them), the first one's bytes.
 
     Compared up to eight bytes at a time through strided views when the positions
     are evenly spaced (records of one fixed layout written one after the other),
-    else gathered.
+    else gathered. Returns a boolean array.
     """
     stride = _stride(at)
+    same = np.ones(len(at), dtype=bool)
     for lo, hi in spans:
         if hi <= lo:
             continue
         if stride is None:
             block = buffer[at[:, None] + np.arange(lo, hi)]
-            if not np.all(block == block[0]):
-                return False
+            same &= np.all(block == block[0], axis=1)
             continue
         width = next(w for w in (8, 4, 2, 1) if w <= hi - lo)
         starts = list(range(lo, hi - width + 1, width))
         if starts[-1] + width < hi:
             starts.append(hi - width)       # the last word overlaps the one before
         for start in starts:
-            column = np.ndarray(shape=(len(at),), dtype=f'<u{width}', buffer=buffer,
-                                offset=int(at[0]) + start, strides=(stride,))
-            if not np.all(column == column[0]):
-                return False
-    return True
+            words = np.ndarray(shape=(len(at),), dtype=f'<u{width}', buffer=buffer,
+                               offset=int(at[0]) + start, strides=(stride,))
+            same &= words == words[0]
+    return same
 
 
-def gather(buffer, offsets, data_offset, dtype, copy=True):
+def column(buffer, at, dtype, copy=True):
     """
-    One field of every message: ``dtype`` at ``data_offset`` in each message's data.
+    ``dtype`` at each position ``at`` of ``buffer`` (uint8).
 
-    Records evenly spaced in the chunk (one writer, fixed layout) are read through a
-    strided view (returned as it is with ``copy=False``: valid while ``buffer`` is);
-    others by gathering their bytes.
+    Evenly spaced positions (records of one fixed layout written one after the
+    other) are read through a strided view (returned as it is with
+    ``copy=False``: valid while ``buffer`` is); others by gathering their bytes.
     """
     dtype = np.dtype(dtype)
-    at = offsets + (MESSAGE_HEADER + data_offset)
+    if not len(at):
+        return np.zeros(0, dtype)
     stride = _stride(at)
     if stride is not None:
         view = np.ndarray(shape=(len(at),), dtype=dtype, buffer=buffer, offset=int(at[0]),
                           strides=(stride,))
         return view.copy() if copy else view
-    columns = np.arange(dtype.itemsize)
-    return buffer[at[:, None] + columns].copy().view(dtype).ravel()
+    if len(at) == 1:
+        return buffer[int(at[0]):int(at[0]) + dtype.itemsize].copy().view(dtype)
+    return buffer[at[:, None] + np.arange(dtype.itemsize)].copy().view(dtype).ravel()
+
+
+def gather(buffer, offsets, data_offset, dtype, copy=True):
+    """One field of every message: ``dtype`` at ``data_offset`` in each message's data."""
+    return column(buffer, offsets + (MESSAGE_HEADER + data_offset), dtype, copy)
 
 
 class _Columns:
@@ -351,17 +570,22 @@ class _Columns:
 
 
 def _lengths(buffer, offsets):
-    return gather(buffer, offsets - MESSAGE_HEADER + 1, 0, '<u8') if len(offsets) else offsets
+    return column(buffer, offsets + 1, '<u8')
 
 
 def log_times(buffer, offsets, copy=True):
-    """Log times (ns) of the messages at ``offsets`` (``copy`` as in :func:`gather`)."""
-    return gather(buffer, offsets - MESSAGE_HEADER + 15, 0, '<u8', copy)
+    """Log times (ns) of the messages at ``offsets`` (``copy`` as in :func:`column`)."""
+    return column(buffer, offsets + 15, '<u8', copy)
 
 
 @dataclass
 class MotionSamples:
-    """Motion samples of a bag: stamp (ns), log time (ns), angle (rad), omega (rad/s)."""
+    """
+    Motion samples of a bag: stamp (ns), log time (ns), angle (rad), omega (rad/s).
+
+    ``rejected`` messages could not be read; ``reasons`` say why. ``skipped``
+    JointState messages do not carry the joint (``joints_seen``: the names they have).
+    """
 
     stamp: np.ndarray
     log_time: np.ndarray
@@ -369,75 +593,120 @@ class MotionSamples:
     omega: np.ndarray
     rejected: int = 0
     reasons: list = field(default_factory=list)
+    skipped: int = 0
+    joints_seen: list = field(default_factory=list)
+
+
+LAYOUTS = 16
+"""JointState layouts (publishers) of one chunk gathered at once; further ones one by one."""
 
 
 def joint_samples(bag, channel, joint):
     """
     Stamp, angle and speed of ``joint`` from every JointState of ``channel``.
 
-    Chunks whose messages all share the first one's layout are gathered with
-    numpy; others are decoded message by message. Messages without the joint
-    (or its position and velocity) are counted as rejected.
+    The joint is found by name among the message's joints, in any order. The
+    messages of a chunk that share the first one's layout (length, frame id,
+    joint names and sequence lengths) are gathered with numpy at once; the
+    others likewise by their own first message's layout (several publishers on
+    one topic), up to :data:`LAYOUTS` layouts a chunk, then one by one.
+    Messages without the joint are skipped and counted (with the joints they
+    name); unreadable ones are rejected.
     """
-    rejected, reasons = 0, []
+    tally = _Tally()
     # Filled in place, chunk by chunk: sized by the message indexes, where there are some.
     columns = _Columns((np.int64, np.int64, float, float), bag.message_count(channel))
     for buffer, offsets in bag.message_offsets(channel):
         lengths = _lengths(buffer, offsets)
-        first = buffer[offsets[0] + MESSAGE_HEADER:offsets[0] + 9 + int(lengths[0])].tobytes()
-        found = find_joint_state_fields(first, joint) if first[:4] == ENCAPSULATION_LE else None
-        uniform = found is not None and bool(np.all(lengths == lengths[0]))
-        if uniform:
-            fields, names_end = found
-            # All but the stamp alike: encapsulation, frame id and joint names.
-            uniform = alike(buffer, offsets + MESSAGE_HEADER, ((0, 4), (12, names_end)))
-        if uniform:
-            stamp, log_time, angle, omega = columns.take(len(offsets))
-            np.multiply(gather(buffer, offsets, fields['sec'], '<i4', copy=False),
-                        1_000_000_000, out=stamp, dtype=np.int64)
-            stamp += gather(buffer, offsets, fields['nanosec'], '<u4', copy=False)
-            log_time[:] = log_times(buffer, offsets, copy=False)
-            angle[:] = gather(buffer, offsets, fields['position'], '<f8', copy=False)
-            omega[:] = gather(buffer, offsets, fields['velocity'], '<f8', copy=False)
-            continue
-        rows = []
+        for _ in range(LAYOUTS):
+            if not len(offsets):
+                break
+            offsets, lengths = _one_layout(buffer, offsets, lengths, joint, columns, tally)
         for offset, length in zip(offsets.tolist(), lengths.tolist()):
-            data = buffer[offset + MESSAGE_HEADER:offset + 9 + length].tobytes()
-            try:
-                found = find_joint_state_fields(data, joint)
-            except (ValueError, struct.error, UnicodeDecodeError):
-                found = None
-            if found is None:
-                rejected += 1
-                if len(reasons) < 5:
-                    reasons.append(f"joint_states without joint '{joint}' or its position and "
-                                   'velocity')
-                continue
-            f = found[0]
-            sec, nanosec = struct.unpack_from('<iI', data, 4)
-            rows.append((sec * 1_000_000_000 + nanosec,
-                         struct.unpack_from('<Q', buffer, offset + 15)[0],
-                         struct.unpack_from('<d', data, f['position'])[0],
-                         struct.unpack_from('<d', data, f['velocity'])[0]))
-        if rows:
-            for column, values in zip(columns.take(len(rows)), zip(*rows)):
-                column[:] = values
+            _one_layout(buffer, np.array([offset]), np.array([length]), joint, columns, tally)
     stamp, log_time, angle, omega = columns.filled()
     if np.any(log_time[1:] < log_time[:-1]):
         order = np.argsort(log_time, kind='stable')
         stamp, log_time, angle, omega = stamp[order], log_time[order], angle[order], omega[order]
-    return MotionSamples(stamp, log_time, angle, omega, rejected, reasons)
+    reasons = [f'{tally.rejected} {channel.topic} messages not readable as JointState with '
+               'position and velocity'] if tally.rejected else []
+    return MotionSamples(stamp, log_time, angle, omega, tally.rejected, reasons,
+                         tally.skipped, sorted(tally.seen))
+
+
+@dataclass
+class _Tally:
+    """JointState messages rejected (unreadable) and skipped (without the joint)."""
+
+    rejected: int = 0
+    skipped: int = 0
+    seen: set = field(default_factory=set)
+
+
+def _one_layout(buffer, offsets, lengths, joint, columns, tally):
+    """
+    Take the messages laid out as the first of ``offsets``; return the other (offsets, lengths).
+
+    Their rows go to ``columns`` if they carry the joint with position and velocity;
+    else they are counted in ``tally``.
+    """
+    first, length = int(offsets[0]), int(lengths[0])
+    data = buffer[first + MESSAGE_HEADER:first + 9 + length].tobytes()
+    try:
+        names, names_end = joint_state_names(data)
+        found = find_joint_state_fields(data, joint)
+    except (ValueError, struct.error, UnicodeDecodeError):
+        tally.rejected += 1
+        return offsets[1:], lengths[1:]
+    spans = [(0, 4), (12, names_end)]    # all but the stamp: encapsulation, frame, names
+    if found is not None:
+        spans += [(found[0][f'{s}_count'], found[0][f'{s}_count'] + 4)
+                  for s in ('position', 'velocity')]
+    same = lengths == length
+    same &= matching(buffer, offsets + MESSAGE_HEADER, spans) if same.all() else \
+        _scattered(same, lambda at: matching(buffer, at + MESSAGE_HEADER, spans), offsets)
+    group = offsets if same.all() else offsets[same]
+    if found is None:
+        if joint not in names:
+            tally.skipped += len(group)
+            tally.seen.update(names[:20] if len(tally.seen) < 20 else ())
+        else:                                # the joint without position or velocity
+            tally.rejected += len(group)
+    else:
+        fields = found[0]
+        stamp, log_time, angle, omega = columns.take(len(group))
+        np.multiply(gather(buffer, group, fields['sec'], '<i4', copy=False), 1_000_000_000,
+                    out=stamp, dtype=np.int64)
+        stamp += gather(buffer, group, fields['nanosec'], '<u4', copy=False)
+        log_time[:] = log_times(buffer, group, copy=False)
+        angle[:] = gather(buffer, group, fields['position'], '<f8', copy=False)
+        omega[:] = gather(buffer, group, fields['velocity'], '<f8', copy=False)
+    if same.all():
+        return offsets[:0], lengths[:0]
+    return offsets[~same], lengths[~same]
+
+
+def _scattered(mask, test, offsets):
+    """``test`` applied to the offsets where ``mask`` holds, spread back over all of them."""
+    out = np.zeros(len(offsets), dtype=bool)
+    out[mask] = test(offsets[mask])
+    return out
 
 
 def float64_samples(bag, channel):
-    """(log time ns, data) of every std_msgs/Float64 of ``channel``."""
+    """(log time ns, data) of every std_msgs/Float64 of ``channel``, in log-time order."""
     times, values = [], []
     for buffer, offsets in bag.message_offsets(channel):
+        lengths = _lengths(buffer, offsets)
+        whole = lengths >= MESSAGE_HEADER - 9 + 12        # encapsulation, pad, float64
+        offsets = offsets[whole]
         times.append(log_times(buffer, offsets).astype(np.int64))
         values.append(gather(buffer, offsets, 4, '<f8'))
     if not times:
         return np.zeros(0, np.int64), np.zeros(0)
-    return np.concatenate(times), np.concatenate(values)
+    times, values = np.concatenate(times), np.concatenate(values)
+    order = np.argsort(times, kind='stable')
+    return times[order], values[order]
 
 
 def wrench_samples(bag, channel):
@@ -458,12 +727,11 @@ def wrench_samples(bag, channel):
 
 
 def string_samples(bag, channel):
-    """[(log time ns, text)] of a std_msgs/String channel; undecodable ones reported."""
+    """[(log time ns, text)] of a std_msgs/String channel in log-time order; bad ones reported."""
     out = []
     for log_time, data in bag.messages(channel):
         try:
             out.append((log_time, read_string_message(data)))
         except (ValueError, UnicodeDecodeError) as error:
-            bag.problems.append(f'{channel.topic}: message at {log_time} ns unreadable '
-                                f'({error}); skipped')
-    return out
+            bag.note(f'{channel.topic}: message at {log_time} ns unreadable ({error}); skipped')
+    return sorted(out, key=lambda pair: pair[0])

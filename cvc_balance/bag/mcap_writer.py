@@ -21,6 +21,7 @@ import os
 import stat
 import struct
 import threading
+from typing import NamedTuple
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -30,7 +31,7 @@ from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
 from cvc_balance.bag.mcap_reader import crc32
-from cvc_balance.messages.msg_schema import schema_text
+from cvc_balance.messages.msg_schema import schema_text, type_hash
 
 PROFILE = 'ros2'
 LIBRARY = 'cvc_balance'
@@ -237,6 +238,7 @@ class BagWriter:
         self._compress = _compressor(compression, level)
         self._chunk_bytes = chunk_bytes
         self._schemas, self._channels, self._chunk_indexes = {}, {}, []
+        self._offered = {}     # channel id -> TopicWritten (without its count)
         self._counts = defaultdict(int)
         self._times = [None, None]
         self._chunk_count = 0
@@ -262,12 +264,20 @@ class BagWriter:
             self._schemas[msg_type] = schema
             self._emit(schema)
         qos = _QOS.format(reliability=2 if best_effort else 1, durability=1 if latched else 2)
+        metadata = {'offered_qos_profiles': qos}
+        if type_hash(msg_type):         # as rosbag2 (Jazzy) writes it
+            metadata['topic_type_hash'] = type_hash(msg_type)
         channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding='cdr',
-                          metadata={'offered_qos_profiles': qos},
-                          schema_id=self._schemas[msg_type].id)
+                          metadata=metadata, schema_id=self._schemas[msg_type].id)
         self._channels[channel.id] = channel
+        self._offered[channel.id] = TopicWritten(topic, msg_type, 0, latched, best_effort)
         self._emit(channel)
         return channel.id
+
+    def written(self):
+        """Return ([TopicWritten] per channel, (first, last) log time ns) written so far."""
+        topics = [t._replace(count=self._counts[channel]) for channel, t in self._offered.items()]
+        return topics, tuple(self._times)
 
     def block(self, parts):
         """Return a :class:`MessageBlock` of ``parts`` holding one chunk's samples."""
@@ -487,6 +497,16 @@ class BagWriter:
                           attachment_count=0, metadata_count=0, chunk_count=self._chunk_count,
                           message_start_time=start or 0, message_end_time=end or 0,
                           channel_message_counts=dict(self._counts))
+
+
+class TopicWritten(NamedTuple):
+    """A channel of a written bag: topic, type, messages written, offered QoS."""
+
+    topic: str
+    msg_type: str
+    count: int
+    latched: bool
+    best_effort: bool
 
 
 def _remove_old(path):

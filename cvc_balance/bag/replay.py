@@ -12,9 +12,10 @@ import time
 
 import numpy as np
 
-from cvc_balance.bag.mcap_reader import (Bag, BagError, float64_samples, joint_samples,
+from cvc_balance.bag.inputs import input_channels
+from cvc_balance.bag.mcap_reader import (BagError, float64_samples, joint_samples,
                                          MotionSamples, string_samples)
-from cvc_balance.bag.mcap_writer import BagWriter
+from cvc_balance.bag.rosbag2 import open_bag, open_writer
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
 from cvc_balance.physics.assessment import assess_balance
@@ -63,6 +64,8 @@ class ReplaySummary:
     accepted: int = 0
     rejected: int = 0
     dropped: int = 0
+    skipped: int = 0           # JointState messages without the joint
+    skipped_reason: str = ''
     reasons: list = field(default_factory=list)
     problems: list = field(default_factory=list)
     segments: list = field(default_factory=list)
@@ -70,30 +73,30 @@ class ReplaySummary:
     output: str = ''
 
 
-def read_inputs(bag, joint_name):
+def read_inputs(bag, joint_name, names=None):
     """
     Motion samples and layout messages of a bag: (MotionSamples, [(log time, text)]).
 
     joint_states (sensor_msgs/JointState) is used if present, else speed
     (std_msgs/Float64, angle integrated over log times as the node does over
-    receive times). Raises BagError when the bag has neither.
+    receive times); ``names`` (:class:`cvc_balance.bag.inputs.InputTopics`) names
+    other topics. Raises BagError when the bag has neither, or when no JointState
+    carries the joint.
     """
-    joints = bag.channel(topics.JOINT_STATES, JOINT_STATE)
-    speed = bag.channel(topics.SPEED, FLOAT64)
-    if joints is not None:
-        motion = joint_samples(bag, joints, joint_name)
-    elif speed is not None:
-        log_time, omega = float64_samples(bag, speed)
+    channels = input_channels(bag, names)
+    if channels.joint_states is not None:
+        motion = joint_samples(bag, channels.joint_states, joint_name)
+        if not len(motion.stamp) and motion.skipped:
+            raise BagError(f'{bag.path}: no {channels.joint_states.topic} message carries '
+                           f"joint '{joint_name}' (they name: {', '.join(motion.joints_seen)}); "
+                           'choose the joint with --joint-name')
+    else:
+        log_time, omega = float64_samples(bag, channels.speed)
         t = log_time * 1e-9
         steps = np.concatenate([[0.0], 0.5 * (omega[1:] + omega[:-1]) * np.diff(t)])
         angle = wrap_angle(np.cumsum(steps))
         motion = MotionSamples(log_time, log_time, angle, omega)
-    else:
-        found = ', '.join(f'{t} ({m})' for t, m in sorted(bag.topics().items())) or 'none'
-        raise BagError(f'{bag.path}: no joint_states ({JOINT_STATE}) or speed ({FLOAT64}) '
-                       f'topic; the bag has: {found}')
-    layout_channel = bag.channel(topics.LAYOUT, STRING)
-    layouts = string_samples(bag, layout_channel) if layout_channel is not None else []
+    layouts = string_samples(bag, channels.layout) if channels.layout is not None else []
     return motion, layouts
 
 
@@ -119,15 +122,20 @@ def layout_events(bag, layout_messages, layout_file=None):
                                 f'(previous stays in force): {error}')
     if not events:
         raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
-                       'give one with --layout')
+                       'name its topic with --layout or give a layout file with --layout-file')
     return events, problems
 
 
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
            time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
-           observer=None, tolerance=None):
+           observer=None, tolerance=None, names=None):
     """
     Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary.
+
+    ``bag_path`` is a bag file or a rosbag2 directory, ``output`` a .mcap file or
+    a rosbag2 directory (:mod:`cvc_balance.bag.rosbag2`); ``names``
+    (:class:`cvc_balance.bag.inputs.InputTopics`) the input topics if not the
+    node's own.
 
     ``observer`` (e.g. a rerun RunLogger) gets ``layout(start_ns, model)`` for each
     layout and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
@@ -136,11 +144,15 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     its own samples, and the segment says which.
     """
     started = time.perf_counter()
-    bag = Bag(bag_path)
+    bag = open_bag(bag_path)
     summary = ReplaySummary(str(bag_path))
-    motion, layout_messages = read_inputs(bag, joint_name)
-    summary.samples = len(motion.stamp) + motion.rejected
+    motion, layout_messages = read_inputs(bag, joint_name, names)
+    summary.samples = len(motion.stamp) + motion.rejected + motion.skipped
     summary.reasons = list(motion.reasons)
+    summary.skipped = motion.skipped
+    if motion.skipped:
+        summary.skipped_reason = (f"{motion.skipped} JointState messages without joint "
+                                  f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
     events, summary.problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
     accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
@@ -158,8 +170,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     alpha, = _where(in_time[accepted], acceleration_series(
         *_where(accepted, t, motion.omega), time_constant))
     summary.accepted = int(use.sum())
-    writer = BagWriter(output, compression=compression,
-                       level=LEVELS.get(compression)) if output else None
+    writer = open_writer(output, compression=compression,
+                         level=LEVELS.get(compression)) if output else None
     channels = _output_channels(writer) if writer else None
     if writer:
         for log, layout in events:
@@ -286,8 +298,10 @@ def _account(segment, model, result, omega):
 def format_summary(summary):
     """Describe a replay for people (SI; degrees and g mm where people read them)."""
     lines = [f'bag {summary.bag}: {summary.samples} motion samples, {summary.accepted} used, '
-             f'{summary.rejected} rejected, {summary.dropped} before any layout']
+             f'{summary.rejected} rejected, {summary.dropped} before any layout'
+             + (f', {summary.skipped} skipped' if summary.skipped else '')]
     lines += [f'  rejected: {r}' for r in summary.reasons]
+    lines += [f'  skipped: {summary.skipped_reason}'] if summary.skipped else []
     lines += [f'  problem: {p}' for p in summary.problems]
     for segment in summary.segments:
         layout = segment.layout

@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from cvc_balance.bag.mcap_writer import BagWriter, MessageBlock
+from cvc_balance.bag.mcap_writer import MessageBlock
+from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import joint_state_layout, string_message, wrench_stamped_layout
 from cvc_balance.physics.engine import loads, RotorModel
@@ -259,10 +260,10 @@ def _load_cells(spec, layout, path):
 
 
 def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16):
-    """Write the scenario's input bag: /layout (latched) and /joint_states."""
+    """Write the scenario's input bag (.mcap file or rosbag2 directory): /layout, /joint_states."""
     stamps = scenario.stamps_ns()
     angle, omega = scenario.measured()
-    with BagWriter(output, compression=compression, chunk_bytes=chunk_bytes) as writer:
+    with open_writer(output, compression=compression, chunk_bytes=chunk_bytes) as writer:
         layout_channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
         joint_channel = writer.add_channel('/joint_states', 'sensor_msgs/msg/JointState',
                                            best_effort=True)

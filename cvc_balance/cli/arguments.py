@@ -3,6 +3,7 @@
 import argparse
 import json
 import math
+import re
 
 from cvc_balance.physics.layout import MAX_MAGNITUDE
 
@@ -55,6 +56,40 @@ def tolerance(text):
     if not value >= 0.0:
         raise argparse.ArgumentTypeError(f'must be >= 0 (or inf), got {text!r}')
     return value
+
+
+_TOPIC = re.compile(r'^[~/]?[A-Za-z_{][A-Za-z0-9_{}/]*$')
+
+
+def topic_name(text):
+    """Parse a ROS topic name (argparse type): letters, digits, '_' and '/' (REP-144)."""
+    if not _TOPIC.match(text) or '//' in text or text.endswith('/'):
+        hint = ' (a layout file goes with --layout-file FILE)' if '.' in text else ''
+        raise argparse.ArgumentTypeError(f'not a topic name: {text!r}{hint}')
+    return text
+
+
+BAG_HELP = 'a bag: .mcap or .db3 file, or rosbag2 directory (metadata.yaml and its files)'
+OUTPUT_BAG_HELP = ('bag to write: a .mcap file, or any other name for a rosbag2 directory '
+                   '(as ros2 bag record -o)')
+
+
+def add_input_topics(parser):
+    """Add --joint-states, --speed and --layout: the bag's input topics, if not the node's."""
+    parser.add_argument('--joint-states', type=topic_name, metavar='TOPIC',
+                        help='JointState topic of the rotor (default: joint_states, also '
+                        'under a namespace)')
+    parser.add_argument('--speed', type=topic_name, metavar='TOPIC',
+                        help='Float64 speed topic, used when there is no JointState (default: '
+                        'speed); alone, it is used instead of joint_states')
+    parser.add_argument('--layout', type=topic_name, metavar='TOPIC',
+                        help='String layout topic (default: layout)')
+
+
+def input_topics(args):
+    """Return the :class:`cvc_balance.bag.inputs.InputTopics` the options name."""
+    from cvc_balance.bag.inputs import InputTopics
+    return InputTopics(args.joint_states, args.speed, args.layout)
 
 
 def print_json(data):

@@ -7,7 +7,8 @@ Heavy modules (rclpy, rerun) are imported by the command that needs them only.
 import argparse
 import sys
 
-from cvc_balance.cli.arguments import finite, tolerance
+from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, finite, input_topics,
+                                       OUTPUT_BAG_HELP, tolerance)
 from cvc_balance.physics.model_choice import Tolerance
 
 
@@ -17,17 +18,18 @@ def register(commands):
                                    description='Write a bag of /layout and /joint_states '
                                    'from a scenario file (speed profile, noise, layout changes).')
     simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
-    simulate.add_argument('-o', '--output', required=True, metavar='BAG', help='bag to write')
+    simulate.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
     simulate.set_defaults(run=_simulate)
 
     replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
                                  description='Read a bag\'s motion and layouts, compute every '
                                  'output with the vectorised engine, write them as a bag and '
                                  'print a summary. No ROS graph needed.')
-    replay.add_argument('bag', metavar='BAG', help='input bag (.mcap)')
-    replay.add_argument('-o', '--output', metavar='OUT', help='bag of outputs to write')
-    replay.add_argument('--layout', metavar='FILE', help='use this layout for the whole run '
-                        '("what if") instead of the bag\'s')
+    replay.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    replay.add_argument('-o', '--output', metavar='OUT', help=OUTPUT_BAG_HELP)
+    replay.add_argument('--layout-file', metavar='FILE', help='use this layout for the whole '
+                        'run ("what if") instead of the bag\'s')
+    add_input_topics(replay)
     replay.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
     replay.add_argument('--alpha-time-constant', type=finite, default=0.1, metavar='S',
                         help='as the node\'s parameter (s)')
@@ -47,27 +49,30 @@ def register(commands):
     view = commands.add_parser('view', help='log every sample of a bag to a rerun .rrd',
                                description='Compute a bag\'s run (as replay does) and log it '
                                'for the rerun viewer: the turning gantry, loads, unbalance.')
-    view.add_argument('bag', metavar='BAG')
+    view.add_argument('bag', metavar='BAG', help=BAG_HELP)
     view.add_argument('-o', '--output', required=True, metavar='RUN.rrd')
     view.add_argument('--every', type=int, default=10, metavar='N',
                       help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
+    add_input_topics(view)
     view.set_defaults(run=_view)
 
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
                                description='Publish the bag\'s layout and motion messages with '
                                'their timing (to drive a running balance_monitor) and record '
                                'the node\'s outputs.')
-    play.add_argument('bag', metavar='BAG')
+    play.add_argument('bag', metavar='BAG', help=BAG_HELP)
     play.add_argument('--rate', type=finite, default=1.0, metavar='X',
                       help='playback speed factor (default 1)')
-    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs to this bag')
+    play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs to '
+                      'this bag: a .mcap file, or a rosbag2 directory for any other name')
+    add_input_topics(play)
     play.set_defaults(run=_play)
 
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
                                  description='Record the run\'s inputs and outputs (raw CDR) '
                                  'to a rosbag2 MCAP file; SIGINT or SIGTERM finalises it.')
-    record.add_argument('-o', '--output', required=True, metavar='BAG')
+    record.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
     record.add_argument('topics', nargs='*', metavar='TOPIC',
                         help='topics (patterns with *); default: inputs, outputs, diagnostics')
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
@@ -93,11 +98,12 @@ def _replay(args):
     from cvc_balance.bag.replay import format_summary, replay
     show = args.progress if args.progress is not None else sys.stderr.isatty()
     logger = _rerun_logger(args.rrd, args.bag) if args.rrd else None
-    summary = replay(args.bag, args.output, args.layout, args.joint_name,
+    summary = replay(args.bag, args.output, args.layout_file, args.joint_name,
                      args.alpha_time_constant, args.max_speed,
                      '' if args.compression == 'none' else args.compression,
                      ReplayProgress() if show else None, observer=logger,
-                     tolerance=Tolerance(*args.tolerance) if args.tolerance else None)
+                     tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
+                     names=input_topics(args))
     if logger:
         logger.finish()
     print(format_summary(summary))
@@ -130,7 +136,8 @@ def _rerun_logger(path, bag, every=10):
 def _view(args):
     from cvc_balance.bag.replay import replay
     logger = _rerun_logger(args.output, args.bag, args.every)
-    summary = replay(args.bag, joint_name=args.joint_name, observer=logger)
+    summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
+                     names=input_topics(args))
     logger.finish()
     print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
           f'{len(summary.segments)} layouts')

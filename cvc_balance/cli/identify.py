@@ -8,7 +8,8 @@ a table for people or, with ``--json``, one object (README "Monitor the real rot
 
 import math
 
-from cvc_balance.cli.arguments import count, print_json
+from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, input_topics,
+                                       print_json)
 from cvc_balance.physics.frames import degrees
 
 
@@ -19,9 +20,10 @@ def register(commands):
         description='Fit the static, couple and per-plane unbalance of each layout segment '
         'of a bag to its load-cell readings (supports/<name>/measured_load), and compare it '
         'with what the layout declares.')
-    identify.add_argument('bag', metavar='BAG', help='recorded run (.mcap)')
-    identify.add_argument('--layout', metavar='FILE',
+    identify.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    identify.add_argument('--layout-file', metavar='FILE',
                           help="the declared layout for the whole run instead of the bag's")
+    add_input_topics(identify)
     identify.add_argument('--window-revs', type=count, metavar='N',
                           help='fit only the last N revolutions of each segment (default: all)')
     identify.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
@@ -32,7 +34,8 @@ def register(commands):
 def run(args):
     """Run ``cvc-balance identify``."""
     from cvc_balance.bag.identify_run import identify_bag
-    segments, problems = identify_bag(args.bag, args.layout, args.joint_name, args.window_revs)
+    segments, problems = identify_bag(args.bag, args.layout_file, args.joint_name,
+                                      args.window_revs, names=input_topics(args))
     summary = {'bag': str(args.bag), 'problems': problems,
                'segments': [segment_summary(s) for s in segments]}
     if args.json:

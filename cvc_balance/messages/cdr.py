@@ -135,49 +135,73 @@ def read_string_message(data):
     return data[8:8 + length - 1].decode('utf-8')
 
 
+class _CdrCursor:
+    """Reads little-endian CDR fields from ``data``, aligned from the end of the header."""
+
+    def __init__(self, data, position):
+        self.data, self.position = data, position
+
+    def align(self, n):
+        self.position += -(self.position - 4) % n
+
+    def u32(self):
+        self.align(4)
+        (value,) = struct.unpack_from('<I', self.data, self.position)
+        self.position += 4
+        return value
+
+    def string(self):
+        length = self.u32()
+        if length < 1 or self.position + length > len(self.data):
+            raise ValueError('string beyond the message')
+        text = bytes(self.data[self.position:self.position + length - 1]).decode('utf-8')
+        self.position += length
+        return text
+
+
+def joint_state_names(data):
+    """
+    Return (joint names, end of the name list) of one JointState's CDR bytes.
+
+    Raises ValueError (or struct.error, UnicodeDecodeError) if the bytes are no
+    little-endian CDR JointState.
+    """
+    if data[:4] != ENCAPSULATION_LE:
+        raise ValueError('not little-endian CDR')
+    cursor = _CdrCursor(data, 12)                  # after encapsulation and stamp
+    cursor.string()                                # frame_id
+    count = cursor.u32()
+    if 4 * count > len(data):
+        raise ValueError('more names than the message holds')
+    names = [cursor.string() for _ in range(count)]
+    return names, cursor.position
+
+
 def find_joint_state_fields(data, joint):
     """
     Offsets of stamp, position and velocity of ``joint`` in one JointState's CDR bytes.
 
-    Returns (offsets {'sec', 'nanosec', 'position', 'velocity'}, end of the name
-    list) or None when the message lacks the joint, its position or velocity.
+    Returns (offsets {'sec', 'nanosec', 'position', 'velocity', 'position_count',
+    'velocity_count'}, end of the name list) or None when the message lacks the
+    joint, its position or velocity; raises ValueError (or struct.error) on a
+    message too short for what it declares.
     """
-    if data[:4] != ENCAPSULATION_LE:
-        raise ValueError('not little-endian CDR')
-    position = 4
-
-    def align(n):
-        nonlocal position
-        position += -(position - 4) % n
-
-    def u32():
-        nonlocal position
-        align(4)
-        (value,) = struct.unpack_from('<I', data, position)
-        position += 4
-        return value
-
-    def string():
-        nonlocal position
-        length = u32()
-        text = bytes(data[position:position + length - 1]).decode('utf-8')
-        position += length
-        return text
-
-    offsets = {'sec': 4, 'nanosec': 8}
-    position = 12
-    string()                                   # frame_id
-    names = [string() for _ in range(u32())]
-    names_end = position
+    names, names_end = joint_state_names(data)
     if joint not in names:
         return None
     index = names.index(joint)
+    offsets = {'sec': 4, 'nanosec': 8}
+    cursor = _CdrCursor(data, names_end)
     for sequence in ('position', 'velocity'):
-        count = u32()
+        cursor.align(4)
+        offsets[f'{sequence}_count'] = cursor.position   # the layout depends on the counts too
+        count = cursor.u32()
         if count:
-            align(8)
+            cursor.align(8)
         if index >= count:
             return None
-        offsets[sequence] = position + 8 * index
-        position += 8 * count
+        offsets[sequence] = cursor.position + 8 * index
+        cursor.position += 8 * count
+        if cursor.position > len(data):
+            raise ValueError(f'JointState {sequence} beyond the message')
     return offsets, names_end

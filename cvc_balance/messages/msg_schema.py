@@ -69,3 +69,21 @@ def schema_text(msg_type):
 
     visit(parts[0], package)
     return '\n'.join(p.rstrip('\n') for p in parts) + '\n'
+
+
+@lru_cache(maxsize=None)
+def type_hash(msg_type):
+    """
+    Return the type description hash (RIHS01) of ``msg_type`` ('pkg/msg/Type'), or ''.
+
+    As the installed package states it (``share/<pkg>/msg/<Type>.json``, made by
+    rosidl when the package was built); rosbag2 writes it to metadata.yaml.
+    """
+    import json
+    package, _, name = msg_type.split('/')
+    try:
+        description = json.loads(_msg_file(package, name).with_suffix('.json').read_text())
+    except (LookupError, OSError, ValueError):
+        return ''
+    return next((entry['hash_string'] for entry in description.get('type_hashes', ())
+                 if entry.get('type_name') == msg_type), '')

@@ -17,7 +17,8 @@ import subprocess
 import sys
 import time
 
-from cvc_balance.bag.mcap_reader import Bag, BagError
+from cvc_balance.bag.inputs import input_channels, InputTopics
+from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import read_string_message
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
@@ -43,25 +44,28 @@ def output_topics(layout_texts):
     return names
 
 
-def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5):
-    """Publish the bag's inputs; return (messages published, recorder's report or None)."""
+def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5,
+         names=None):
+    """
+    Publish the bag's inputs; return (messages published, recorder's report or None).
+
+    ``bag_path``: a bag file or rosbag2 directory; ``names`` (InputTopics): its input
+    topics if not the node's own. They are published on the node's topic names.
+    """
     import rclpy
 
-    bag = Bag(bag_path)
-    for problem in bag.problems:
-        print(f'play: {bag_path}: {problem}')
+    bag = open_bag(bag_path)
+    channels = input_channels(bag, names)      # BagError names the bag's topics
     inputs = []
-    for topic, msg_type, qos in (
-            (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, input_qos(1000)),
-            (topics.SPEED, topics.FLOAT64_TYPE, input_qos(1000)),
-            (topics.LAYOUT, topics.STRING_TYPE, LAYOUT_QOS)):
-        channel = bag.channel(topic, msg_type)
+    for topic, msg_type, qos, channel in (
+            (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, input_qos(1000),
+             channels.joint_states),
+            (topics.SPEED, topics.FLOAT64_TYPE, input_qos(1000), channels.speed),
+            (topics.LAYOUT, topics.STRING_TYPE, LAYOUT_QOS, channels.layout)):
         if channel is not None:
             inputs.append((topic, msg_type, qos, bag.messages(channel)))
-    motions = (topics.JOINT_STATES, topics.SPEED)
-    if not any(topic in motions for topic, *_ in inputs):
-        raise BagError(f'{bag_path}: no joint_states or speed topic to play; the bag has: '
-                       + ', '.join(sorted(bag.topics())))
+    for problem in bag.problems:
+        print(f'play: {bag_path}: {problem}')
     layouts = [data for topic, _, _, messages in inputs if topic == topics.LAYOUT
                for _, data in messages]
     outputs = output_topics([read_string_message(data) for data in layouts])
@@ -122,7 +126,9 @@ def _wait(condition, timeout):
 
 def play_main(args):
     """Run ``cvc-balance play``; return the exit code."""
-    published, report = play(args.bag, args.rate, args.output)
+    names = InputTopics(getattr(args, 'joint_states', None), getattr(args, 'speed', None),
+                        getattr(args, 'layout', None))
+    published, report = play(args.bag, args.rate, args.output, names=names)
     print(f'{args.bag}: published {published} messages')
     if report:
         print(f'recorded {report}')

@@ -14,7 +14,7 @@ import importlib
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-from cvc_balance.bag.mcap_writer import BagWriter
+from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
 from cvc_balance.ros.executor import spin
 
@@ -36,9 +36,13 @@ class BagRecorder:
 
     def __init__(self, node, path, names=DEFAULT_TOPICS, compression='zstd',
                  chunk_bytes=1 << 20):
-        """Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``."""
+        """
+        Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``.
+
+        ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``).
+        """
         self.node = node
-        self.writer = BagWriter(path, compression=compression, chunk_bytes=chunk_bytes)
+        self.writer = open_writer(path, compression=compression, chunk_bytes=chunk_bytes)
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
