@@ -52,6 +52,10 @@ def register(commands):
     view.add_argument('--every', type=int, default=10, metavar='N',
                       help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
+    view.add_argument('--screenshot', metavar='PNG', help='also render the viewer headless '
+                      '(needs a Vulkan adapter, e.g. Mesa lavapipe) and save a picture')
+    view.add_argument('--at', type=finite, metavar='S', help='the picture\'s moment: S '
+                      'seconds after the first sample (default: the last sample)')
     view.set_defaults(run=_view)
 
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
@@ -136,6 +140,14 @@ def _view(args):
           f'{len(summary.segments)} layouts')
     for problem in summary.problems:
         print(f'  problem: {problem}')
+    if args.screenshot:
+        from cvc_balance.view.screenshot import render, ViewerError
+        try:
+            when = render(args.output, args.screenshot, args.at)
+        except ViewerError as error:
+            print(f'cvc-balance: error: {args.screenshot}: {error}', file=sys.stderr)
+            return 1
+        print(f'{args.screenshot}: the viewer at {when * 1e-9:.3f} s of the time line')
     return 0
 
 
