@@ -31,7 +31,7 @@ THIRD_PARTY = {
     'physics': {'numpy', 'yaml'},
     'messages': {'ament_index_python'},
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
-    'view': {'numpy', 'rerun'},
+    'view': {'numpy', 'rerun', 'PIL'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
 }
 

@@ -65,7 +65,12 @@ def register(commands):
     play.add_argument('bag', metavar='BAG')
     play.add_argument('--rate', type=finite, default=1.0, metavar='X',
                       help='playback speed factor (default 1)')
-    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs to this bag')
+    play.add_argument('-o', '--output', metavar='OUT', help='record the outputs (and '
+                      '/diagnostics) to this bag')
+    play.add_argument('--wait', type=finite, default=20.0, metavar='S',
+                      help='give up (exit code 1) when no node subscribes to the motion topic, '
+                      "or the recorder sees none of the node's outputs, within S seconds "
+                      '(default 20)')
     play.set_defaults(run=_play)
 
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',

@@ -166,7 +166,8 @@ def format_table(s):
                      'omega = 0)')
         return '\n'.join(lines)
     lines += ['', f"ISO 21940-11 G {balance['grade']:g} at the {balance['speed_source']} "
-              f"{balance['service_speed']:.4g} rad/s: U_per {balance['permissible_g_mm']:.1f} g mm"]
+              f"{balance['service_speed']:.4g} rad/s: U_per "
+              f"{balance['permissible_g_mm']:.1f} g mm"]
     if balance['planes']:
         rows = [['plane', 'z [m]', 'U [g mm]', 'angle [deg]', 'allowed [g mm]', 'U / allowed',
                  'correction mass']]

@@ -71,8 +71,8 @@ class BalanceAssessment:
         """
         if not self.planes:
             return (self.static_amount / self.permissible,)
-        return tuple(p.amount / allowed for p, allowed in zip(self.planes,
-                                                               self.plane_permissible))
+        return tuple(p.amount / allowed
+                     for p, allowed in zip(self.planes, self.plane_permissible))
 
 
 def assess_balance(model, omega=None, grade=None):
@@ -156,7 +156,7 @@ class Verdict:
 
 def judge_balance(model, top_speed=0.0, grade=None, warn_fraction=WARN_FRACTION):
     """
-    The verdict on ``model``'s balance (see the module's description).
+    Judge ``model``'s balance: its Verdict (see the module's description).
 
     ``top_speed`` rad/s: the top |omega| seen, used only when the layout has no
     service speed; ``grade`` mm/s (default the layout's).

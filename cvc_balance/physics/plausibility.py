@@ -90,8 +90,8 @@ def _mass_outliers(components):
         others = list(masses)
         others.remove(c.mass)
         middle = len(others) // 2
-        median = others[middle] if len(others) % 2 else 0.5 * (others[middle - 1]
-                                                                + others[middle])
+        median = others[middle] if len(others) % 2 else \
+            0.5 * (others[middle - 1] + others[middle])
         if c.mass > MASS_RATIO * median:
             warnings.append(f"component '{c.name}': mass {c.mass:g} kg is "
                             f'{c.mass / median:.0f} times the median of the others '

@@ -24,7 +24,7 @@ error, back to OK as info).
 
 import math
 import sys
-import time
+from time import monotonic
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -125,7 +125,7 @@ class BalanceMonitor(Node):
         self._omega = 0.0
         self._counts = {'accepted': 0, 'rejected': 0, 'dropped': 0}
         self._period_accepted = 0
-        self._period_start = time.monotonic()
+        self._period_start = monotonic()
         self._started = self._period_start
         self._last_input = None     # monotonic s of the last accepted motion sample
         self._top_speed = 0.0       # top |omega| accepted under the layout in force
@@ -149,7 +149,7 @@ class BalanceMonitor(Node):
                                                    name=self.get_fully_qualified_name()),
                                     every=self.params['rerun_every'])
             if self._active is not None:
-                self._rerun.layout(0, self._active.model)
+                self._rerun.layout(None, self._active.model)   # at the first sample
         self._recorder = None
         self._record = {}
         if self.params['record_path']:
@@ -247,7 +247,7 @@ class BalanceMonitor(Node):
         speed = omega if omega >= 0.0 else -omega
         if speed > self._top_speed:
             self._top_speed = speed
-        self._last_input = time.monotonic()
+        self._last_input = monotonic()
         self._counts['accepted'] += 1
         self._period_accepted += 1
 
@@ -294,10 +294,13 @@ class BalanceMonitor(Node):
             return
         self._active = active  # one reference swap: takes effect between two samples
         self._top_speed = 0.0
+        if self._last_input is None:    # STALE counts from the first layout, not the start
+            self._started = monotonic()
         self._layout_error = ''
         if getattr(self, '_rerun', None) is not None:
             # On the samples' time line: from the last sample on.
-            self._rerun.layout(int((self._last_time or 0.0) * 1e9), active.model)
+            self._rerun.layout(None if self._last_time is None
+                               else int(self._last_time * 1e9), active.model)
         self.get_logger().info(f"layout '{layout.name}' ({active.digest}) from {source}: "
                                f'{len(layout.components)} components, '
                                f'{active.model.mass:.3f} kg')
@@ -316,7 +319,7 @@ class BalanceMonitor(Node):
     # -- diagnostics -----------------------------------------------------------------
 
     def _publish_diagnostics(self):
-        now = time.monotonic()
+        now = monotonic()
         status = DiagnosticStatus(name='balance_monitor: rotor balance',
                                   hardware_id=self.get_fully_qualified_name())
         values = {'accepted': self._counts['accepted'], 'rejected': self._counts['rejected'],
@@ -372,7 +375,8 @@ class BalanceMonitor(Node):
                                            self.params['warn_fraction'])
         values = {'layout': layout.name, 'layout digest': active.digest,
                   'speed [rad/s]': abs(self._omega), 'top speed seen [rad/s]': self._top_speed,
-                  'grade [mm/s]': grade, 'verdict': verdict.words}
+                  'grade [mm/s]': grade, 'verdict level': verdict.level,
+                  'verdict': verdict.text}
         judged = verdict.assessment
         if judged is not None:
             values.update({'judged at [rad/s]': judged.omega,
@@ -423,7 +427,7 @@ def _text(value):
 
 
 def usage():
-    """The node's --help: what it does, its topics and parameters."""
+    """Return the node's --help: what it does, its topics and parameters."""
     lines = ['usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] [--params-file FILE] '
              '[-r FROM:=TO] ...]',
              '',
@@ -453,14 +457,19 @@ def main(args=None):
     """
     argv = list(sys.argv if args is None else args)
     own = argv[1:argv.index('--ros-args')] if '--ros-args' in argv else argv[1:]
-    if '-h' in own or '--help' in own:
+    if '-h' in argv[1:] or '--help' in argv[1:]:      # also after --ros-args
         print(usage())
         return 0
     if own:
         print(f'balance_monitor: error: unexpected argument {own[0]!r} (ROS arguments go '
               'after --ros-args; see --help)', file=sys.stderr)
         return 2
-    rclpy.init(args=argv)
+    try:
+        rclpy.init(args=argv)
+    except Exception as error:      # rclpy's UnknownROSArgsError, RCLError: bad ROS arguments
+        print(f'balance_monitor: error: bad ROS arguments: {error} (see --help)',
+              file=sys.stderr)
+        return 2
     try:
         node = BalanceMonitor()
     except (ParameterException, ValueError) as error:   # ValueError: e.g. the rerun mode

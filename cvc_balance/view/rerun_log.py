@@ -148,6 +148,7 @@ class RunLogger:
         self.grade = grade or None
         self.warn_fraction = warn_fraction
         self._model = None
+        self._pending = None
         self._supports = []
         self._planes = None
         self._count = 0
@@ -165,7 +166,16 @@ class RunLogger:
     # -- a layout comes into force -------------------------------------------------
 
     def layout(self, time_ns, model):
-        """Draw the rotor of a layout in force from ``time_ns``, judge it and say so."""
+        """
+        Draw the rotor of a layout in force from ``time_ns``, judge it and say so.
+
+        ``time_ns`` None: from the next sample's stamp (the live node before any sample:
+        its stamps, not the wall clock, are the time line).
+        """
+        if time_ns is None:
+            self._pending = model
+            return
+        self._pending = None
         layout = model.layout
         rec = self.rec
         previous = self._model.layout if self._model is not None else None
@@ -272,7 +282,7 @@ class RunLogger:
         self._draw_balance(verdict)
 
     def _event(self, text, level, colour=None):
-        """An events line, its time written first (the time column would take the width)."""
+        """Log an events line, its time first (the time column would take the width)."""
         clock = datetime.datetime.fromtimestamp(self._time_ns * 1e-9, datetime.timezone.utc)
         self.rec.log('events', rr.TextLog(f"{clock.strftime('%H:%M:%S.%f')[:11]}  {text}",
                                           level=level, color=colour))
@@ -374,7 +384,7 @@ class RunLogger:
     def sample(self, stamp_ns, angle, omega, alpha, result):
         """Log one sample of the live node (SampleLoads), every ``every``-th one only."""
         self._count += 1
-        if self._count % self.every:
+        if self._count % self.every and self._pending is None:
             return
         one = SimpleNamespace(
             support_force={name: np.array([force]) for name, (force, _) in
@@ -386,8 +396,10 @@ class RunLogger:
     def samples(self, stamp_ns, angle, omega, alpha, result, every=None):
         """Log a block of samples, given as arrays, and the engine's result for them."""
         every = every or self.every
-        model, rec = self._model, self.rec
         stamp_ns = np.asarray(stamp_ns)
+        if self._pending is not None and len(stamp_ns):
+            self.layout(int(stamp_ns[0]), self._pending)
+        model, rec = self._model, self.rec
         times = rr.TimeColumn(TIMELINE, timestamp=stamp_ns * 1e-9)
         n = len(omega)
         scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,

@@ -81,7 +81,7 @@ class HeadlessViewer:
         shutil.rmtree(self._work, ignore_errors=True)
 
     def log(self):
-        """What the viewer printed (for error messages)."""
+        """Return what the viewer printed (for error messages)."""
         with open(self.log_path, errors='replace') as stream:
             return stream.read()
 
@@ -131,12 +131,12 @@ class HeadlessViewer:
         return when
 
     def views(self):
-        """The viewer's views: objects with view_id, view_class, name, reports."""
+        """Return the viewer's views: objects with view_id, view_class, name, reports."""
         return self.client.get_state().views
 
     def screenshot(self, view_id=None, settle=4.0, timeout=90.0):
         """
-        A settled picture of the viewer (or one view) as an RGB array (h, w, 3).
+        Take a settled picture of the viewer (or one view): an RGB array (h, w, 3).
 
         Frames are taken until the picture has not changed (every pixel within 2 of
         255) for ``settle`` seconds and four frames: loading, axis fitting and the
