@@ -17,8 +17,13 @@ from cvc_balance.physics.frames import STANDARD_GRAVITY
 LONGEST = 100.0
 """m: no rotor this package is for has a radius, length or axial position this long."""
 
-MASS_RATIO = 300.0
-"""A component heavier than this many times the median of the others is suspect."""
+MASS_RATIO = 1000.0
+"""A point mass heavier than this many times the median of the others is suspect."""
+
+DENSITY_RANGE = (5.0, 30000.0)
+"""kg/m^3 a component's mass over its shape's volume may have: foam to beyond osmium
+(22 590 kg/m^3, the densest element). Shapes stand for hollow housings too, so the low
+end is generous."""
 
 MASS_PEERS = 3
 """Fewest other components for a median to compare a mass with."""
@@ -32,7 +37,8 @@ def layout_warnings(layout):
     Return the plausibility warnings of a validated Layout, one line each (a tuple).
 
     Empty when nothing looks mistaken. Checks: angles beyond a full turn, lengths
-    of :data:`LONGEST` m or more, a mass far above the others', gravity that is
+    of :data:`LONGEST` m or more, a shaped component's density outside
+    :data:`DENSITY_RANGE`, a point mass far above the others', gravity that is
     neither 0 nor Earth's.
     """
     warnings = []
@@ -46,7 +52,8 @@ def layout_warnings(layout):
             if abs(value) >= LONGEST:
                 warnings.append(f'{where}: field {field} {value:g} m is {LONGEST:g} m or more: '
                                 'millimetres for metres? (lengths are in m)')
-    warnings += _mass_outliers(layout.components)
+        warnings += _density(c, where)
+    warnings += _mass_outliers([c for c in layout.components if _volume(c.shape) is None])
     for s in layout.supports:
         if abs(s.z) >= LONGEST:
             warnings.append(f"support '{s.name}': field z {s.z:g} m is {LONGEST:g} m or more: "
@@ -80,8 +87,38 @@ def _lengths(component):
         yield f'shape.size[{i}]', value
 
 
+def _density(component, where):
+    """A warning (as a list) when a shaped component's density is no material's."""
+    volume = _volume(component.shape)
+    if not volume:
+        return []
+    density = component.mass / volume
+    low, high = DENSITY_RANGE
+    if density > high:
+        why = 'denser than any material: grams for kilograms? (masses are in kg)'
+    elif density < low:
+        why = 'lighter than foam: a mass or a shape in other units?'
+    else:
+        return []
+    return [f'{where}: mass {component.mass:g} kg in its shape ({volume:.4g} m^3) is '
+            f'{density:.4g} kg/m^3, {why}']
+
+
+def _volume(shape):
+    """Volume (m^3) of a shape; None for a point mass or no shape."""
+    if shape is None or shape.type == 'point':
+        return None
+    if shape.type == 'cylinder':
+        return math.pi * shape.radius ** 2 * shape.length
+    if shape.type == 'tube':
+        return math.pi * (shape.outer_radius ** 2 - shape.inner_radius ** 2) * shape.length
+    if shape.type == 'box':
+        return shape.size[0] * shape.size[1] * shape.size[2]
+    return 4.0 / 3.0 * math.pi * shape.radius ** 3
+
+
 def _mass_outliers(components):
-    """Warnings for masses above MASS_RATIO times the median of the other components'."""
+    """Warnings for point masses above MASS_RATIO times the median of the others'."""
     if len(components) <= MASS_PEERS:
         return []
     masses = sorted(c.mass for c in components)
