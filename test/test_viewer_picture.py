@@ -136,7 +136,7 @@ def test_the_polar_views_draw_limit_unbalance_and_correction(pictures):
     polar = by_class(pictures, '2D')
     assert len(polar) == 2
     for name, (_, _, image) in polar.items():
-        key = 'plane_I' if 'plane I:' in name else 'plane_II'
+        key = 'plane_I' if name.startswith('plane I ') else 'plane_II'
         for colour in (rerun_log.LEVEL_COLOURS['ERROR'], rerun_log.PLANE_COLOURS[key],
                        rerun_log.CORRECTION_COLOUR):
             assert colour_pixels(image, colour).sum() >= 100, (name, colour)

@@ -130,8 +130,8 @@ def blueprint(support_names, planes=PLANES):
 
 def _polar_title(key):
     if key == 'static':
-        return 'static U / permissible'
-    return f'plane {key[6:]}: U / permissible'
+        return 'static [U / U_per]'
+    return f'plane {key[6:]} [U / U_per,{key[6:]}]'
 
 
 class RunLogger:
