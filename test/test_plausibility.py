@@ -51,8 +51,8 @@ MISTAKES = [
     (dict(GANTRY, gravity=[0.0, -1.0, 0.0]), ['gravity', 'magnitude 1 m/s^2']),
     (dict(GANTRY, balancing=dict(GANTRY['balancing'], correction_radius=680)),
      ['balancing.correction_radius 680 m']),
-    (dict(GANTRY, supports=[{'name': 'front', 'z': -120}, {'name': 'rear', 'z': 120,
-                                                            'axial': True}]),
+    (dict(GANTRY, supports=[{'name': 'front', 'z': -120},
+                            {'name': 'rear', 'z': 120, 'axial': True}]),
      ["support 'front'", 'z -120 m']),
 ]
 

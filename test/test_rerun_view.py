@@ -98,7 +98,7 @@ def test_logged_values_equal_the_engine_at_sampled_times(logged):
 
 
 def hand_layouts():
-    """The bag's layouts from its scenario: [(first stamp ns, Layout)]."""
+    """Return the bag's layouts from its scenario: [(first stamp ns, Layout)]."""
     scenario = load_scenario(ROOT / 'bags' / 'spin_up_tube_swap.yaml')
     return [(round((scenario.start + at - 0.5 / scenario.rate) * 1e9), parse_layout(mapping))
             for at, mapping in scenario.layouts]
@@ -146,9 +146,11 @@ def test_support_loads_are_the_static_weight_and_the_unbalance_turning(logged):
 
 def test_unbalance_plot_is_each_plane_over_its_own_share_and_the_verdict_lanes(logged):
     """
-    Plane i: |U_i| / (U_per share_i), U_per = G m / Omega at the service speed (ISO 21940-11),
-    share_i = lever of the other plane / span within 0.3-0.7; the lanes: OK until the tube
-    swap (worst 0.40), ERROR after it (plane II 1.17), as the fractions say by hand.
+    Plot each plane's |U_i| / (U_per share_i) and the verdict lanes as computed by hand.
+
+    U_per = G m / Omega at the service speed (ISO 21940-11), share_i = lever of the other
+    plane / span within 0.3-0.7; the lanes: OK until the tube swap (worst 0.40), ERROR
+    after it (plane II 1.17), as the fractions say.
     """
     scalars, _, _ = logged
     layouts = hand_layouts()
@@ -158,8 +160,8 @@ def test_unbalance_plot_is_each_plane_over_its_own_share_and_the_verdict_lanes(l
         mass = sum(c.mass for c in layout.components)
         z_com = sum(c.mass * c.z for c in layout.components) / mass
         u_per = layout.balancing.grade * 1e-3 * mass / layout.balancing.service_speed
-        shares = [min(max(s, 0.3), 0.7) for s in ((z_ii - z_com) / (z_ii - z_i),
-                                                   (z_com - z_i) / (z_ii - z_i))]
+        levers = ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))
+        shares = [min(max(s, 0.3), 0.7) for s in levers]
         fractions = [abs(u) / (u_per * share)
                      for u, share in zip(two_plane_split(layout, z_i, z_ii), shares)]
         for key, want in zip(('plane_I', 'plane_II'), fractions):

@@ -62,7 +62,7 @@ def cli(*args):
 
 
 def number_before(text, unit, label):
-    """The number printed just before ``unit`` on the line that starts with ``label``."""
+    """Return the number printed before ``unit`` on the line that starts with ``label``."""
     line = next(line for line in text.splitlines() if line.strip().startswith(label))
     match = re.search(r'(-?[\d.]+(?:e[+-]?\d+)?)\s+' + re.escape(unit) + r'(\s|$)', line)
     assert match, (line, unit)
@@ -174,8 +174,8 @@ def test_node_publishes_and_reports_in_their_units(probe, tmp_path):  # noqa: F8
 HEAVY = {'name': 'heavy_lump', 'mass': 8.0, 'radius': 0.65, 'angle_deg': 40.0, 'z': 0.1}
 
 
-def test_node_judges_at_the_service_speed_goes_stale_and_logs_each_change_once(probe,  # noqa
-                                                                              tmp_path):
+def test_node_judges_at_the_service_speed_goes_stale_and_logs_each_change_once(
+        probe, tmp_path):  # noqa: F811
     """Out of grade at service speed reads ERROR while coasting at 0.0137 rad/s too."""
     gantry = yaml.safe_load(open('config/ct_gantry.yaml'))
     heavy = dict(gantry, components=gantry['components'] + [HEAVY])
@@ -211,7 +211,7 @@ def test_node_judges_at_the_service_speed_goes_stale_and_logs_each_change_once(p
     assert all(a != b for a, b in zip(levels, levels[1:])), node.log()
 
 
-def test_node_without_service_speed_judges_at_the_top_speed_seen(probe, tmp_path):  # noqa
+def test_node_without_service_speed_judges_at_the_top_speed_seen(probe, tmp_path):  # noqa: F811
     """The live speed only decides the top speed: slower samples later do not lower it."""
     layout = dict(COUPLE, balancing={'planes': [-0.2, 0.2], 'grade': 6.3})
     node = start_node(tmp_path, layout)

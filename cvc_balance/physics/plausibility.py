@@ -88,7 +88,7 @@ def _lengths(component):
 
 
 def _density(component, where):
-    """A warning (as a list) when a shaped component's density is no material's."""
+    """Warn (a list of one) when a shaped component's density is no material's."""
     volume = _volume(component.shape)
     if not volume:
         return []

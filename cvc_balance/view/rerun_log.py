@@ -156,7 +156,10 @@ class RunLogger:
         self._drawn_top = 0.0
         self._verdict = None
         self._unit_fractions = ()     # fractions at 1 rad/s (layouts without a service speed)
+        self._level_code = 0
         self._static_logged = False
+        self._time_ns = 0
+        self._warnings, self._changes = (), {}
 
     def finish(self):
         """Flush and close the recording."""
