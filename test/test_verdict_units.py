@@ -248,3 +248,19 @@ def test_solve_replay_and_view_give_the_same_verdict_for_the_bundled_bag(tmp_pat
                                f"{balance['equivalent_grade']:.3g} at the service speed")
         assert said.endswith(balance['verdict'])
     assert [v.split()[1] for v in verdicts] == ['OK:', 'ERROR:']   # the view: test_rerun_view
+
+
+def test_the_verdict_is_the_full_models_when_a_smaller_model_computes_the_loads(tmp_path):
+    """A tilted body's own product of inertia is a couple unbalance the point masses lack."""
+    layout = dict(COUPLE, components=COUPLE['components'] + [{
+        'name': 'tilted_disc', 'mass': 5.0, 'radius': 0.0, 'angle': 0.0,
+        'inertia': {'ixx': 0.3, 'iyy': 0.3, 'izz': 0.5, 'ixy': 0.0, 'ixz': -0.02,
+                    'iyz': 0.0}}])     # ixz = -int x z dm: P_xz = +0.02 kg m^2 of its own
+    path = write(tmp_path, layout)
+    full = json.loads(cli('solve', path, '--omega', 10, '--json').stdout)
+    small = json.loads(cli('solve', path, '--omega', 10, '--json',
+                           '--tolerance', '1e9', '1e9', '1e9').stdout)
+    assert small['model'] == 'point masses, planar' and full['model'] == 'rigid bodies'
+    assert full['couple_unbalance']['kg_m2'] == pytest.approx(0.22, rel=1e-12)  # 0.2 + 0.02
+    assert small['balance'] == full['balance']
+    assert small['couple_unbalance'] == full['couple_unbalance']

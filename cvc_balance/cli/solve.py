@@ -57,9 +57,11 @@ def run(args):
         model_name, model_line = 'rigid bodies', 'model: rigid bodies (full)'
     q = radians(args.angle_deg)
     result = sample_loads(model, q, args.omega, args.alpha, gravity)
-    # The verdict at the service speed, or at the speed asked when the layout has none.
-    verdict = judge_balance(model, top_speed=abs(args.omega))
-    summary = solve_summary(model, result, verdict, args.omega, args.alpha, q, gravity)
+    # The verdict at the service speed, or at the speed asked when the layout has none; of
+    # the full model (a reduced one may leave out the components' own products).
+    full = model if model.own_inertia else RotorModel.from_layout(layout)
+    verdict = judge_balance(full, top_speed=abs(args.omega))
+    summary = solve_summary(full, result, verdict, args.omega, args.alpha, q, gravity)
     summary['model'] = model_name
     summary['warnings'] = list(warnings)
     if args.json:

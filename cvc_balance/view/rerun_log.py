@@ -40,6 +40,7 @@ import rerun.blueprint.encodings as rre
 
 from cvc_balance.physics import assessment
 from cvc_balance.physics.assessment import assess_balance, judge_balance, WARN_FRACTION
+from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.frames import degrees, g_mm, stator_tilt
 from cvc_balance.physics.load_parts import support_load_parts
 from cvc_balance.physics.plausibility import layout_warnings
@@ -147,7 +148,7 @@ class RunLogger:
         self.every = every
         self.grade = grade or None
         self.warn_fraction = warn_fraction
-        self._model = None
+        self._model = self._full = None
         self._pending = None
         self._supports = []
         self._planes = None
@@ -191,6 +192,8 @@ class RunLogger:
             rec.send_blueprint(blueprint(self._supports, planes))
             self._log_styles(new, planes)
         self._model = model
+        # The verdict is the full model's (replay --tolerance may hand a reduced one).
+        self._full = model if model.own_inertia else RotorModel.from_layout(layout)
         self._top_speed = self._drawn_top = 0.0
         rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
         axis, angle = stator_tilt(layout.gravity)
@@ -213,7 +216,7 @@ class RunLogger:
         self._changes = changes if previous is not None else {}
         self._unit_fractions, self._level_code = (), 0
         if layout.balancing.service_speed is None:
-            self._unit_fractions = assess_balance(model, 1.0, self._grade()).fractions
+            self._unit_fractions = assess_balance(self._full, 1.0, self._grade()).fractions
         self._judge(0.0)
 
     def _grade(self):
@@ -256,7 +259,7 @@ class RunLogger:
         rec.log('world/stator/rotor/components', rr.Clear(recursive=True))
         smallest = view_resolution(layout)
         labelled = _labelled(layout, changes, [(0.0, 0.0, s.z) for s in layout.supports]
-                             + _correction_places(model))
+                             + _correction_places(self._full))
         for component in layout.components:
             changed = component.name in changes
             label = None
@@ -271,7 +274,7 @@ class RunLogger:
 
     def _judge(self, top_speed):
         """Judge the layout in force at the top speed seen; log the verdict."""
-        verdict = judge_balance(self._model, top_speed, self._grade(), self.warn_fraction)
+        verdict = judge_balance(self._full, top_speed, self._grade(), self.warn_fraction)
         old, self._verdict = self._verdict, verdict
         rec = self.rec
         rec.log('verdict_level', rr.StateChange(state=verdict.level))
@@ -326,7 +329,7 @@ class RunLogger:
         rec = self.rec
         if a is None:
             return
-        places = _correction_places(self._model)
+        places = _correction_places(self._full)
         texts = [f'{key[6:]}: add {p.correction_mass * 1e3:.0f} g'
                  for key, p in zip(PLANES, a.planes)]
         if len(places) == 2 and math.dist(*places) <= LABEL_SPACING:
@@ -457,7 +460,7 @@ class RunLogger:
         if self._top_speed > 1.01 * self._drawn_top:   # the polar arrows grow with it
             self._drawn_top = self._top_speed
             self.rec.set_time(TIMELINE, timestamp=int(stamp_ns[-1]) * 1e-9)
-            self._verdict = judge_balance(self._model, self._top_speed, self._grade(),
+            self._verdict = judge_balance(self._full, self._top_speed, self._grade(),
                                           self.warn_fraction)
             self._draw_balance(self._verdict)
 
