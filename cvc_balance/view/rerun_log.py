@@ -51,6 +51,8 @@ NEWTONS_PER_METRE = 20000.0
 """Support load arrows: 20 kN per metre of arrow."""
 UNBALANCE_NEWTONS_PER_METRE = 200.0
 """Unbalance force arrow: 200 N per metre (a balanced gantry's is tens of newtons)."""
+LONGEST_ARROW = 1.0
+"""m: longer arrows are drawn this long (their label or plot gives the value)."""
 PLANES = ('plane_I', 'plane_II')
 STATOR_RING_RADIUS = 0.85      # m, drawn for orientation
 VIEW_PIXELS = 500
@@ -91,8 +93,13 @@ def plane_keys(layout):
     return PLANES if layout.correction_planes() is not None else ('static',)
 
 
-def blueprint(support_names, planes=PLANES):
-    """Arrange the views: 3D and polar left, plots in the middle, verdict and events right."""
+def blueprint(support_names, planes=PLANES, static_top=None):
+    """
+    Arrange the views: 3D and polar left, plots in the middle, verdict and events right.
+
+    ``static_top`` (N): the static weight plot's axis runs from 0 to it (a constant
+    line would otherwise be fitted to its rounding).
+    """
     plots = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
                                    '(ISO 21940-11: OK, WARN, ERROR)'),
              rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its '
@@ -106,7 +113,9 @@ def blueprint(support_names, planes=PLANES):
                                  'per support [N] (unbalance at speed)',
                                  plot_legend=rrb.PlotLegend('LeftTop')),
               rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
-                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('LeftBottom'))]
+                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('LeftBottom'),
+                                 axis_y=rrb.ScalarAxis(range=[0.0, static_top])
+                                 if static_top else None)]
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
                                 y_range=[-POLAR_BOUNDS[1], POLAR_BOUNDS[1]])
     polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
@@ -158,6 +167,7 @@ class RunLogger:
         self._verdict = None
         self._unit_fractions = ()     # fractions at 1 rad/s (layouts without a service speed)
         self._level_code = 0
+        self._static_top = 0.0
         self._static_logged = False
         self._time_ns = 0
         self._warnings, self._changes = (), {}
@@ -185,11 +195,15 @@ class RunLogger:
         previous = self._model.layout if self._model is not None else None
         planes = plane_keys(layout)
         new = [s.name for s in model.supports if s.name not in self._supports]
-        if new or planes != self._planes:
-            # The blueprint has a plot per support and a polar view per plane.
+        at_rest = support_load_parts(model, np.linspace(0.0, 2 * math.pi, 8, endpoint=False),
+                                     0.0, 0.0).static
+        heaviest = max(float(v.max()) for v in at_rest.values())
+        if new or planes != self._planes or heaviest > self._static_top:
+            # The blueprint has a polar view per plane and the static weights' axis.
             self._supports += new
             self._planes = planes
-            rec.send_blueprint(blueprint(self._supports, planes))
+            self._static_top = max(self._static_top, 1.25 * heaviest)
+            rec.send_blueprint(blueprint(self._supports, planes, self._static_top or None))
             self._log_styles(new, planes)
         self._model = model
         # The verdict is the full model's (replay --tolerance may hand a reduced one).
@@ -272,15 +286,21 @@ class RunLogger:
 
     # -- the verdict ------------------------------------------------------------------
 
-    def _judge(self, top_speed):
-        """Judge the layout in force at the top speed seen; log the verdict."""
+    def _judge(self, top_speed, quiet=False):
+        """
+        Judge the layout in force at the top speed seen; log the verdict.
+
+        ``quiet``: only the text and drawings follow (the top speed grew, the level
+        did not change).
+        """
         verdict = judge_balance(self._full, top_speed, self._grade(), self.warn_fraction)
         old, self._verdict = self._verdict, verdict
         rec = self.rec
-        rec.log('verdict_level', rr.StateChange(state=verdict.level))
+        if not quiet:
+            rec.log('verdict_level', rr.StateChange(state=verdict.level))
         rec.log('verdict', rr.TextDocument(self._verdict_text(verdict),
                                            media_type='text/markdown'))
-        if old is None or old.level != verdict.level or top_speed == 0.0:
+        if not quiet and (old is None or old.level != verdict.level or top_speed == 0.0):
             a = verdict.assessment
             said = verdict.words if a is None else \
                 f'G {a.equivalent_grade:.3g} at {a.omega:.4g} rad/s: {verdict.words}'
@@ -303,7 +323,8 @@ class RunLogger:
         else:
             lines += [f'achieved **G {a.equivalent_grade:.3g}** at the {verdict.speed_source} '
                       f'{a.omega:.4g} rad/s; U_per {g_mm(a.permissible):,.0f} g mm', '',
-                      f'correction masses at r {self._model.layout.correction_radius():.3g} m:',
+                      f'correction masses at r {layout.correction_radius():.3g} m:'
+                      if a.planes else 'no correction planes: the static unbalance is judged',
                       '',
                       '| plane | U [g mm] | angle | / limit | add |',
                       '|---|---:|---:|---:|---|']
@@ -411,7 +432,7 @@ class RunLogger:
         scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,
                    'plots/drive_torque': result.drive_torque,
                    'plots/unbalance/limit': np.ones(n)}
-        parts = support_load_parts(model, angle, result)
+        parts = support_load_parts(model, angle, omega, alpha)
         for name in parts.static:
             scalars[f'plots/load_rotating/{name}'] = parts.rotating[name]
             scalars[f'plots/load_static/{name}'] = parts.static[name]
@@ -457,12 +478,15 @@ class RunLogger:
             self._judge(float(top[k]))
         self._level_code = int(code[-1])
         self._top_speed = float(top[-1])
-        if self._top_speed > 1.01 * self._drawn_top:   # the polar arrows grow with it
-            self._drawn_top = self._top_speed
-            self.rec.set_time(TIMELINE, timestamp=int(stamp_ns[-1]) * 1e-9)
-            self._verdict = judge_balance(self._full, self._top_speed, self._grade(),
-                                          self.warn_fraction)
-            self._draw_balance(self._verdict)
+        # The verdict text and the polar arrows follow the top speed in 3 % steps.
+        while True:
+            k = int(np.searchsorted(top, max(1.03 * self._drawn_top, 1e-300), side='left'))
+            if k >= len(top):
+                break
+            self._drawn_top = float(top[k])
+            self._time_ns = int(stamp_ns[k])
+            self.rec.set_time(TIMELINE, timestamp=self._time_ns * 1e-9)
+            self._judge(self._drawn_top, quiet=True)
 
     def _arrows(self, stamp_ns, omega, result, every):
         """Load and unbalance arrows for a subset of the samples (a viewer need not draw all)."""
@@ -474,15 +498,24 @@ class RunLogger:
             rec.set_time(TIMELINE, timestamp=int(stamp_ns[k]) * 1e-9)
             forces = [result.support_force[s.name][k] for s in model.supports]
             rec.log('world/stator/loads', rr.Arrows3D(
-                origins=origins, vectors=[list(f / NEWTONS_PER_METRE) for f in forces],
+                origins=origins, vectors=[_arrow(f, NEWTONS_PER_METRE) for f in forces],
                 colors=[LOAD_COLOUR], radii=0.012))
             # The static unbalance's centrifugal force, U omega^2, turns with the rotor.
             force, _ = unbalance_wrench(static, (0.0, 0.0), float(omega[k]))
             size = math.hypot(force[0], force[1])
             rec.log('world/stator/rotor/unbalance_force', rr.Arrows3D(
-                origins=[com], vectors=[[f / UNBALANCE_NEWTONS_PER_METRE for f in force]],
+                origins=[com], vectors=[_arrow(force, UNBALANCE_NEWTONS_PER_METRE)],
                 colors=[UNBALANCE_COLOUR], radii=0.012,
                 labels=[f'U ω² {size:.0f} N'] if size > 1.0 else None))
+
+
+def _arrow(force, newtons_per_metre):
+    """Return the arrow (m) of a force (N), at most LONGEST_ARROW long."""
+    vector = np.asarray(force, float) / newtons_per_metre
+    length = float(np.linalg.norm(vector))
+    if length > LONGEST_ARROW:
+        vector = vector * (LONGEST_ARROW / length)
+    return vector.tolist()
 
 
 def describe_changes(previous, layout):
