@@ -271,7 +271,7 @@ def test_support_load_parts_of_a_point_mass_and_of_a_balanced_rotor():
     A 2 kg point at r 0.3 m midway between two supports: each carries m g / 2 at rest and
     m r sqrt(omega^4 + alpha^2) / 2 turning; a balanced rotor's turning part is only the
     rounding of its first moments (S = (-5.6e-17, 7.3e-17) kg m, sin of fl(pi)): measured
-    5.8e-14 N at 30 rad/s, where a difference of totals would leave ~1e-12 of the weight.
+    5.8e-14 N at 30 rad/s.
     """
     import numpy as np
     from cvc_balance.physics.engine import RotorModel
