@@ -93,12 +93,12 @@ def plane_keys(layout):
     return PLANES if layout.correction_planes() is not None else ('static',)
 
 
-def blueprint(support_names, planes=PLANES, static_top=None):
+def blueprint(support_names, planes=PLANES, static_range=None):
     """
     Arrange the views: 3D and polar left, plots in the middle, verdict and events right.
 
-    ``static_top`` (N): the static weight plot's axis runs from 0 to it (a constant
-    line would otherwise be fitted to its rounding).
+    ``static_range`` (N, N): the static weight plot's axis (a constant line would
+    otherwise be fitted to its rounding).
     """
     plots = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
                                    '(ISO 21940-11: OK, WARN, ERROR)'),
@@ -113,9 +113,9 @@ def blueprint(support_names, planes=PLANES, static_top=None):
                                  'per support [N] (unbalance at speed)',
                                  plot_legend=rrb.PlotLegend('LeftTop')),
               rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
-                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('LeftBottom'),
-                                 axis_y=rrb.ScalarAxis(range=[0.0, static_top])
-                                 if static_top else None)]
+                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('RightBottom'),
+                                 axis_y=rrb.ScalarAxis(range=list(static_range))
+                                 if static_range else None)]
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
                                 y_range=[-POLAR_BOUNDS[1], POLAR_BOUNDS[1]])
     polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
@@ -167,7 +167,7 @@ class RunLogger:
         self._verdict = None
         self._unit_fractions = ()     # fractions at 1 rad/s (layouts without a service speed)
         self._level_code = 0
-        self._static_top = 0.0
+        self._static_range = None      # N, the static weight plot's axis
         self._static_logged = False
         self._time_ns = 0
         self._warnings, self._changes = (), {}
@@ -197,13 +197,20 @@ class RunLogger:
         new = [s.name for s in model.supports if s.name not in self._supports]
         at_rest = support_load_parts(model, np.linspace(0.0, 2 * math.pi, 8, endpoint=False),
                                      0.0, 0.0).static
+        lightest = min(float(v.min()) for v in at_rest.values())
         heaviest = max(float(v.max()) for v in at_rest.values())
-        if new or planes != self._planes or heaviest > self._static_top:
+        shown = self._static_range
+        outside = heaviest > 0.0 and (shown is None or lightest < shown[0]
+                                      or heaviest > shown[1])
+        if new or planes != self._planes or outside:
             # The blueprint has a polar view per plane and the static weights' axis.
             self._supports += new
             self._planes = planes
-            self._static_top = max(self._static_top, 1.25 * heaviest)
-            rec.send_blueprint(blueprint(self._supports, planes, self._static_top or None))
+            if outside:
+                low, high = 0.75 * lightest, 1.15 * heaviest
+                self._static_range = (low, high) if shown is None else \
+                    (min(low, shown[0]), max(high, shown[1]))
+            rec.send_blueprint(blueprint(self._supports, planes, self._static_range))
             self._log_styles(new, planes)
         self._model = model
         # The verdict is the full model's (replay --tolerance may hand a reduced one).
