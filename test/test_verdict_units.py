@@ -268,6 +268,8 @@ def test_the_verdict_is_the_full_models_when_a_smaller_model_computes_the_loads(
 
 def test_support_load_parts_of_a_point_mass_and_of_a_balanced_rotor():
     """
+    Split the loads of a point mass and of a balanced rotor by hand.
+
     A 2 kg point at r 0.3 m midway between two supports: each carries m g / 2 at rest and
     m r sqrt(omega^4 + alpha^2) / 2 turning; a balanced rotor's turning part is only the
     rounding of its first moments (S = (-5.6e-17, 7.3e-17) kg m, sin of fl(pi)): measured
