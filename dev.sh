@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # cvc_balance developer entry point: sets up .venv on first use, then runs a job.
-#   ./dev.sh demo      the main job: a bundled bag replayed live through the node, recorded
+#   ./dev.sh demo      the main job: a bundled bag played live into the node; its verdict, run, .rrd
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
-#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer, rendered headless)
+#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer headless, at 6.5 s of the bag)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 venv="$here/.venv"
