@@ -14,6 +14,7 @@ which ``./dev.sh test`` installs when it runs as root with apt-get. Skipped, say
 only where they are missing and the viewer finds no adapter.
 """
 
+import os
 from pathlib import Path
 import shutil
 import subprocess
@@ -60,8 +61,13 @@ def pictures(tmp_path_factory):
             views[view.name] = (view.view_class, view.reports,
                                 viewer.screenshot(view.view_id, settle=0.0))
         state = viewer.client.get_state()
+    try:       # the viewer's process group (the rerun script and its binary) has gone
+        os.killpg(viewer.process.pid, 0)
+        left_running = True
+    except ProcessLookupError:
+        left_running = False
     return {'start': start, 'cursor': cursor, 'whole': whole, 'views': views,
-            'current': state.recordings[0].current_time}
+            'current': state.recordings[0].current_time, 'left_running': left_running}
 
 
 def colour_pixels(image, colour, distance=45.0):
@@ -83,6 +89,10 @@ def test_the_cursor_is_where_the_story_is(pictures):
     assert pictures['cursor'] == pictures['start'] + round(AT * 1e9)
     assert pictures['current'] == pictures['cursor']
     assert pictures['whole'].shape[:2] == (900, 1600)
+
+
+def test_the_viewer_is_stopped_with_its_child(pictures):
+    assert not pictures['left_running']
 
 
 def test_the_views_are_all_there_and_healthy(pictures):

@@ -13,6 +13,7 @@ start-up notice are done. Nothing depends on timing luck. It needs a Vulkan adap
 import io
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import tempfile
@@ -48,10 +49,12 @@ class HeadlessViewer:
         port = _free_port()
         self.log_path = os.path.join(self._work, 'viewer.log')
         self._log = open(self.log_path, 'w')
+        # Its own process group: the `rerun` script runs the viewer binary as a child,
+        # and both must go when this viewer is closed.
         self.process = subprocess.Popen(
             [rerun, '--headless', '--bind', '127.0.0.1', '--port', str(port),
              '--window-size', f'{size[0]}x{size[1]}', '--hide-welcome-screen'],
-            env=env, stdout=self._log, stderr=subprocess.STDOUT)
+            env=env, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             self.client = self._connect(f'rerun+http://127.0.0.1:{port}/proxy', start_timeout)
             self.client.open(str(os.path.abspath(rrd)))
@@ -69,14 +72,20 @@ class HeadlessViewer:
         self.close()
 
     def close(self):
-        """Stop the viewer process (this one only) and remove its scratch folder."""
-        if self.process.poll() is None:
-            self.process.terminate()
+        """Stop the viewer (its process group, which it alone is in); remove its scratch."""
+        group = self.process.pid
+        for sig, wait in ((signal.SIGTERM, 10), (signal.SIGKILL, 10)):
             try:
-                self.process.wait(10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+                os.killpg(group, sig)
+            except ProcessLookupError:      # the group has gone
+                break
+            deadline = time.monotonic() + wait
+            while time.monotonic() < deadline and _group_alive(group):
+                self.process.poll()          # reap the direct child
+                time.sleep(0.05)
+            if not _group_alive(group):
+                break
+        self.process.wait()
         self._log.close()
         shutil.rmtree(self._work, ignore_errors=True)
 
@@ -175,6 +184,15 @@ def render(rrd, png, seconds=None, size=SIZE):
         when = viewer.at(seconds)
         save_png(viewer.screenshot(), png)
     return when
+
+
+def _group_alive(group):
+    """Tell whether any process of the process group ``group`` is still running."""
+    try:
+        os.killpg(group, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def _free_port():
