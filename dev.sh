@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # cvc_balance developer entry point: sets up .venv on first use, then runs a job.
-#   ./dev.sh demo      the main job: a bundled bag replayed live through the node, recorded
+#   ./dev.sh demo      the main job: a bundled bag played live into the node; its verdict, run, .rrd
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
-#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer, rendered headless)
+#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer headless, at 6.5 s of the bag)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 venv="$here/.venv"
@@ -79,36 +79,54 @@ colcon_check() {
 
 demo() {
   # The balance_monitor node on this machine's ROS graph (discovery kept on localhost),
-  # a bundled bag played into it live, its outputs recorded, then the offline replay's
-  # summary of the same bag.
-  local bag="$here/bags/spin_up_tube_swap.mcap" out="$here/runs/spin_up_tube_swap_live.mcap"
-  mkdir -p "$here/runs"
+  # a bundled bag played into it live, its outputs and diagnostics recorded and its rerun
+  # view saved; it ends with the node's verdict per layout and where the run is.
+  local bag="$here/bags/spin_up_tube_swap.mcap" runs="$here/runs"
+  local out="$runs/spin_up_tube_swap_live.mcap" rrd="$runs/spin_up_tube_swap_live.rrd"
+  local said="$runs/spin_up_tube_swap_live.txt"
+  mkdir -p "$runs"
   export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-42}" ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
   # exec: $! is then the node itself; SIGTERM, since background jobs ignore SIGINT.
-  in_venv exec balance-monitor --ros-args --params-file "$here/config/balance_monitor.yaml" &
+  in_venv exec balance-monitor --ros-args --params-file "$here/config/balance_monitor.yaml" \
+    -p rerun:=save -p rerun_target:="$rrd" &
   local node=$!
   trap 'kill -TERM $node 2>/dev/null; wait $node 2>/dev/null' EXIT
-  in_venv cvc-balance play "$bag" -o "$out"
+  in_venv cvc-balance play "$bag" -o "$out" | tee "$said"
   kill -TERM $node && wait $node
   trap - EXIT
   echo
-  in_venv cvc-balance replay "$bag"
+  sed -n '/verdict per layout/,$p' "$said"
+  echo "the live run's outputs and /diagnostics: $out"
+  echo "its rerun view:                         $rrd"
+  echo "open it:                                ./dev.sh run rerun $rrd"
+}
+
+vulkan() {
+  # rerun's viewer renders through Vulkan; without a GPU, Mesa's software driver (lavapipe).
+  if command -v dpkg >/dev/null 2>&1 && dpkg -s mesa-vulkan-drivers libvulkan1 >/dev/null 2>&1; then
+    return 0
+  fi
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    echo "dev.sh: installing mesa-vulkan-drivers libvulkan1 (the viewer's headless rendering)" >&2
+    apt-get update -qq && apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+    return $?
+  fi
+  echo "dev.sh: mesa-vulkan-drivers and libvulkan1 are missing and cannot be installed" \
+    "here (needs root and apt-get)" >&2
+  return 1
 }
 
 screenshot() {
-  # The rerun viewer on a bundled bag, rendered headless (Debian's Mesa Vulkan drivers),
-  # saved as docs/viewer.png. Analytics off in a private config folder.
-  if ! dpkg -s mesa-vulkan-drivers libvulkan1 >/dev/null 2>&1; then
-    apt-get update -qq && apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
-  fi
-  local work config
-  work="$(mktemp -d)"; config="$work/config"
-  mkdir -p "$here/docs" "$config"
-  XDG_CONFIG_HOME="$config" in_venv rerun analytics disable >/dev/null 2>&1
-  in_venv cvc-balance view "$here/bags/spin_up_tube_swap.mcap" -o "$work/run.rrd"
-  XDG_CONFIG_HOME="$config" in_venv rerun --headless --bind 127.0.0.1 --window-size 1600x900 \
-    "$work/run.rrd" --screenshot-to "$here/docs/viewer.png" >"$work/viewer.log" 2>&1
-  echo "wrote $here/docs/viewer.png"
+  # The rerun viewer on the bundled tube-swap bag, rendered headless (Mesa's Vulkan
+  # drivers), its time cursor set to 6.5 s after the first sample: after the tube swap,
+  # at service speed. Analytics off in the viewer's private config folder.
+  vulkan
+  local work
+  work="$(mktemp -d)"
+  mkdir -p "$here/docs"
+  in_venv cvc-balance view "$here/bags/spin_up_tube_swap.mcap" -o "$work/run.rrd" \
+    --screenshot "$here/docs/viewer.png" --at 6.5
+  rm -rf "$work"
 }
 
 cmd="${1:-}"
@@ -120,6 +138,7 @@ case "$cmd" in
     demo ;;
   test)
     setup
+    vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
     colcon_check
     cd "$here" && in_venv python -m pytest "$@" ;;
   run)

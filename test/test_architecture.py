@@ -35,7 +35,7 @@ THIRD_PARTY = {
     'messages': {'ament_index_python'},
     'design': {'numpy', 'scipy', 'yaml', 'matplotlib'},   # matplotlib in design/charts only
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal', 'rosbags'},
-    'view': {'numpy', 'rerun'},
+    'view': {'numpy', 'rerun', 'PIL'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
 }
 

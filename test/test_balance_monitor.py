@@ -238,7 +238,7 @@ def test_diagnostics_go_from_ok_to_error_and_back(probe, tmp_path):
     assert wait_for_diagnostics(probe, level_is(DiagnosticStatus.ERROR), timeout=2.0)
     status, values = diagnostic_values(probe)
     assert float(values['achieved grade [mm/s]']) > 6.3
-    assert 'out of G 6.3' in status.message
+    assert 'OUT OF G 6.3' in status.message
     layouts.publish(String(data=yaml.safe_dump(gantry)))
     stream(0.8)
     assert wait_for_diagnostics(probe, level_is(DiagnosticStatus.OK), timeout=2.0)

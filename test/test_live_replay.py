@@ -41,8 +41,8 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
     node = NodeProcess('cvc_balance.ros.balance_monitor', extra, tmp_path / 'node.log')
     live = tmp_path / 'live.mcap'
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
-                          str(live)], env=ros_environment(), capture_output=True, text=True,
-                         timeout=120)
+                          str(live), '--wait', '60'], env=ros_environment(),
+                         capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr
     assert node.stop(signal.SIGINT) == 0
     log = node.log()
@@ -56,6 +56,7 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
             msg = reader.deserialize(raw, connection.msgtype)
             by_rosbags.setdefault(connection.topic, []).append(
                 msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+    assert by_rosbags.pop('/diagnostics')       # play -o records the node's verdicts too
     got, expected = outputs(live), outputs(offline)
     assert {t: sorted(s) for t, s in by_rosbags.items()} == \
         {t: sorted(s.tolist()) for t, (s, _) in got.items()}

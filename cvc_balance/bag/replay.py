@@ -18,13 +18,14 @@ from cvc_balance.bag.mcap_reader import (BagError, float64_samples, joint_sample
 from cvc_balance.bag.rosbag2 import open_bag, open_writer
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
-from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.assessment import judge_balance
 from cvc_balance.physics.engine import loads, RotorModel
-from cvc_balance.physics.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
+from cvc_balance.physics.frames import g_mm, ROTOR_FRAME, STATOR_FRAME, wrap_angle
 from cvc_balance.physics.layout import LayoutError
 from cvc_balance.physics.layout_file import layout_from_text
 from cvc_balance.physics.model_choice import choose_model, Envelope
 from cvc_balance.physics.motion import acceleration_series, accepted_samples
+from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
 JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
@@ -312,16 +313,20 @@ def format_summary(summary):
         lines.append(f'  peak load on the stator {segment.peak_total:.1f} N; per support: '
                      + ', '.join(f'{name} {peak:.1f} N'
                                  for name, peak in segment.peak_support.items()))
-        speed = layout.balancing.service_speed or segment.max_speed
-        if speed > 0.0:
-            a = assess_balance(model, speed)
-            planes = '; '.join(f'plane {label} (z {p.z:.3f} m) {p.amount * 1e6:.1f} g mm at '
-                               f'{math.degrees(p.angle):.1f} deg'
-                               for label, p in zip(('I', 'II'), a.planes)) or \
-                f'static {a.static_amount * 1e6:.1f} g mm'
-            verdict = 'WITHIN' if a.within_grade else 'OUT OF'
-            lines.append(f'  unbalance: {planes}; achieved G {a.equivalent_grade:.3g} at '
-                         f'{speed:.4g} rad/s -> {verdict} G {a.grade:g}')
+        lines += [f'  warning: {warning}' for warning in layout_warnings(layout)]
+        verdict = judge_balance(model, top_speed=segment.max_speed)
+        a = verdict.assessment
+        if a is not None:
+            for label, p, allowed, fraction in zip(('I', 'II'), a.planes, a.plane_permissible,
+                                                   a.fractions):
+                lines.append(f'  plane {label:2} (z {p.z:.3f} m): unbalance {g_mm(p.amount):.1f} '
+                             f'g mm at {math.degrees(p.angle):.1f} deg = {fraction:.2f} of its '
+                             f'permissible {g_mm(allowed):.1f} g mm')
+            if not a.planes:
+                lines.append(f'  static unbalance {g_mm(a.static_amount):.1f} g mm = '
+                             f'{a.fractions[0]:.2f} of the permissible {g_mm(a.permissible):.1f}'
+                             ' g mm')
+        lines.append(f'  verdict {verdict.level}: {verdict.text}')
         if segment.choice is not None:
             lines.append(f'  {segment.choice.describe()}')
     rate = summary.accepted / summary.seconds if summary.seconds else 0.0

@@ -123,6 +123,10 @@ def load_scenario(path):
         raise ScenarioError(f'{path}: cannot read scenario: {error}') from None
     if not isinstance(spec, dict):
         raise ScenarioError(f'{path}: a scenario is a mapping')
+    if 'components' in spec and 'profile' not in spec:
+        raise ScenarioError(f'{path}: this is a layout file (it has components), not a '
+                            'scenario; a scenario names a layout (layout: FILE) and gives a '
+                            'speed profile, e.g. bags/spin_up_tube_swap.yaml')
     known = {'name', 'layout', 'joint_name', 'rate', 'seed', 'noise', 'profile', 'events',
              'start', 'hidden', 'load_cells'}
     for key in spec:

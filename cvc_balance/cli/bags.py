@@ -55,6 +55,10 @@ def register(commands):
                       help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
     add_input_topics(view)
+    view.add_argument('--screenshot', metavar='PNG', help='also render the viewer headless '
+                      '(needs a Vulkan adapter, e.g. Mesa lavapipe) and save a picture')
+    view.add_argument('--at', type=finite, metavar='S', help='the picture\'s moment: S '
+                      'seconds after the first sample (default: the last sample)')
     view.set_defaults(run=_view)
 
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
@@ -64,9 +68,14 @@ def register(commands):
     play.add_argument('bag', metavar='BAG', help=BAG_HELP)
     play.add_argument('--rate', type=finite, default=1.0, metavar='X',
                       help='playback speed factor (default 1)')
-    play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs to '
-                      'this bag: a .mcap file, or a rosbag2 directory for any other name')
+    play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs (and '
+                      '/diagnostics) to this bag: a .mcap file, or a rosbag2 directory for '
+                      'any other name')
     add_input_topics(play)
+    play.add_argument('--wait', type=finite, default=20.0, metavar='S',
+                      help='give up (exit code 1) when no node subscribes to the motion topic, '
+                      "or the recorder sees none of the node's outputs, within S seconds "
+                      '(default 20)')
     play.set_defaults(run=_play)
 
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
@@ -143,6 +152,14 @@ def _view(args):
           f'{len(summary.segments)} layouts')
     for problem in summary.problems:
         print(f'  problem: {problem}')
+    if args.screenshot:
+        from cvc_balance.view.screenshot import render, ViewerError
+        try:
+            when = render(args.output, args.screenshot, args.at)
+        except ViewerError as error:
+            print(f'cvc-balance: error: {args.screenshot}: {error}', file=sys.stderr)
+            return 1
+        print(f'{args.screenshot}: the viewer at {when * 1e-9:.3f} s of the time line')
     return 0
 
 

@@ -5,13 +5,15 @@ A table for people or, with ``--json``, one object for programs.
 """
 
 import math
+import sys
 
 from cvc_balance.cli.arguments import finite, print_json, tolerance
-from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.assessment import judge_balance
 from cvc_balance.physics.engine import RotorModel, sample_loads
-from cvc_balance.physics.frames import degrees, radians, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.physics.frames import degrees, g_mm, g_mm2, radians, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout_file import load_layout
 from cvc_balance.physics.model_choice import choose_model, Envelope, Tolerance
+from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance
 
 
@@ -41,6 +43,9 @@ def register(commands):
 def run(args):
     """Run ``cvc-balance solve``."""
     layout = load_layout(args.layout)
+    warnings = layout_warnings(layout)
+    for warning in warnings:
+        print(f'cvc-balance: warning: {args.layout}: {warning}', file=sys.stderr)
     gravity = tuple(args.gravity) if args.gravity else layout.gravity
     if args.tolerance:
         choice = choose_model(layout, Tolerance(*args.tolerance),
@@ -51,10 +56,13 @@ def run(args):
         model_name, model_line = 'rigid bodies', 'model: rigid bodies (full)'
     q = radians(args.angle_deg)
     result = sample_loads(model, q, args.omega, args.alpha, gravity)
-    speed = layout.balancing.service_speed or abs(args.omega)
-    assessment = assess_balance(model, speed) if speed > 0.0 else None
-    summary = solve_summary(model, result, assessment, args.omega, args.alpha, q, gravity)
+    # The verdict at the service speed, or at the speed asked when the layout has none; of
+    # the full model (a reduced one may leave out the components' own products).
+    full = model if model.own_inertia else RotorModel.from_layout(layout)
+    verdict = judge_balance(full, top_speed=abs(args.omega))
+    summary = solve_summary(full, result, verdict, args.omega, args.alpha, q, gravity)
     summary['model'] = model_name
+    summary['warnings'] = list(warnings)
     if args.json:
         print_json(summary)
     else:
@@ -63,8 +71,13 @@ def run(args):
     return 0
 
 
-def solve_summary(model, result, assessment, omega, alpha, q, gravity):
-    """Collect the solve result as plain JSON-able data (SI; angles in degrees for people)."""
+def solve_summary(model, result, verdict, omega, alpha, q, gravity):
+    """
+    Collect the solve result as plain JSON-able data (SI; angles in degrees for people).
+
+    ``verdict``: :class:`cvc_balance.physics.assessment.Verdict`. Amounts people read in
+    balancing units carry them in their key (``g_mm``); the rest is SI.
+    """
     static = static_unbalance(model)
     couple = couple_unbalance(model)
     layout = model.layout
@@ -91,20 +104,25 @@ def solve_summary(model, result, assessment, omega, alpha, q, gravity):
                              'angle_deg': degrees(math.atan2(couple[1], couple[0]))},
         'balance': None,
     }
+    assessment = verdict.assessment
     if assessment is not None:
         summary['balance'] = {
             'grade': assessment.grade, 'service_speed': assessment.omega,
-            'permissible_g_mm': assessment.permissible * 1e6,
-            'planes': [{'z': p.z, 'g_mm': p.amount * 1e6, 'angle_deg': degrees(p.angle),
-                        'permissible_g_mm': allowed * 1e6,
+            'speed_source': verdict.speed_source,
+            'permissible_g_mm': g_mm(assessment.permissible),
+            'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees(p.angle),
+                        'permissible_g_mm': g_mm(allowed), 'fraction': fraction,
                         'correction_mass_kg': p.correction_mass,
                         'correction_radius': p.correction_radius,
                         'correction_angle_deg': degrees(p.correction_angle)}
-                       for p, allowed in zip(assessment.planes,
-                                             assessment.plane_permissible)],
+                       for p, allowed, fraction in zip(assessment.planes,
+                                                       assessment.plane_permissible,
+                                                       assessment.fractions)],
             'equivalent_grade': assessment.equivalent_grade,
             'finest_grade_met': assessment.finest_grade_met,
             'within_grade': assessment.within_grade,
+            'level': verdict.level,
+            'verdict': verdict.words,
         }
     return summary
 
@@ -121,47 +139,68 @@ def format_table(s):
         f"gravity {_vec(sample['gravity'], '.4g')} m/s^2 (stator)",
         '',
         'Load on the stator through the supports (moment about O)',
-        f"{'':24}{'x':>12}{'y':>12}{'z':>12}",
     ]
+    rows = [['', '', 'x', 'y', 'z']]
     for label, key, unit in (('force, stator frame', 'force_stator', 'N'),
                              ('moment, stator frame', 'moment_stator', 'N m'),
                              ('force, rotor frame', 'force_rotor', 'N'),
                              ('moment, rotor frame', 'moment_rotor', 'N m')):
-        lines.append(f'{label:20}{unit:>4}' + ''.join(f'{v:12.2f}' for v in s[key]))
+        rows.append([label, unit] + [f'{v:.2f}' for v in s[key]])
+    lines += _columns(rows, left=2)
     lines.append(f"drive torque about +Z {s['drive_torque']:.3f} N m")
-    lines += ['', 'Per support, stator frame (force N; tilting moment N m about the support)',
-              f"{'support':12}{'z [m]':>8}{'Fx':>11}{'Fy':>11}{'Fz':>11}{'|F_xy|':>11}"
-              f"{'Mx':>11}{'My':>11}"]
+    lines += ['', 'Per support, stator frame (force N; tilting moment N m about the support)']
+    rows = [['support', 'z [m]', 'Fx', 'Fy', 'Fz', '|F_xy|', 'Mx', 'My']]
     for name, sup in s['supports'].items():
         f, m = sup['force'], sup['moment']
-        label = name + (' (axial)' if sup['axial'] else '')
-        lines.append(f'{label:12}{sup["z"]:8.3f}' + ''.join(f'{v:11.2f}' for v in f)
-                     + f'{math.hypot(f[0], f[1]):11.2f}{m[0]:11.2f}{m[1]:11.2f}')
+        rows.append([name + (' (axial)' if sup['axial'] else ''), f'{sup["z"]:.3f}']
+                    + [f'{v:.2f}' for v in (*f, math.hypot(f[0], f[1]), m[0], m[1])])
+    lines += _columns(rows)
     st, cp = s['static_unbalance'], s['couple_unbalance']
-    lines += ['', 'Unbalance (rotor frame)',
-              f"static  {st['kg_m'] * 1e6:12.1f} g mm    at {st['angle_deg']:7.2f} deg",
-              f"couple  {cp['kg_m2'] * 1e6:12.1f} g mm^2  at {cp['angle_deg']:7.2f} deg"]
+    lines += ['', 'Unbalance (rotor frame)']
+    lines += _columns([['static', f"{g_mm(st['kg_m']):.1f}", 'g mm', 'at',
+                        f"{st['angle_deg']:.2f} deg"],
+                       ['couple', f"{g_mm2(cp['kg_m2']):.1f}", 'g mm^2', 'at',
+                        f"{cp['angle_deg']:.2f} deg"]], left=1, right_of=(2, 3))
     balance = s['balance']
     if balance is None:
-        lines.append('balance grade: not judged (no service speed and omega = 0)')
+        lines.append('balance grade: NOT JUDGED (the layout names no service speed and '
+                     'omega = 0)')
         return '\n'.join(lines)
-    lines += ['', f"ISO 21940-11 G {balance['grade']:g} at {balance['service_speed']:.4g} rad/s: "
-              f"U_per {balance['permissible_g_mm']:.1f} g mm"]
+    lines += ['', f"ISO 21940-11 G {balance['grade']:g} at the {balance['speed_source']} "
+              f"{balance['service_speed']:.4g} rad/s: U_per "
+              f"{balance['permissible_g_mm']:.1f} g mm"]
     if balance['planes']:
-        lines.append(f"{'plane':6}{'z [m]':>8}{'U [g mm]':>11}{'angle':>9}{'allowed':>10}"
-                     '   correction mass')
+        rows = [['plane', 'z [m]', 'U [g mm]', 'angle [deg]', 'allowed [g mm]', 'U / allowed',
+                 'correction mass']]
         for label, p in zip(('I', 'II'), balance['planes']):
             correction = 'none: give balancing.correction_radius' \
                 if p['correction_mass_kg'] is None else (
                     f"{p['correction_mass_kg'] * 1e3:.1f} g at r {p['correction_radius']:.3f} m, "
                     f"{p['correction_angle_deg']:.2f} deg")
-            lines.append(f"{label:6}{p['z']:8.3f}{p['g_mm']:11.1f}{p['angle_deg']:9.2f}"
-                         f"{p['permissible_g_mm']:10.1f}   {correction}")
+            rows.append([label, f"{p['z']:.3f}", f"{p['g_mm']:.1f}", f"{p['angle_deg']:.2f}",
+                         f"{p['permissible_g_mm']:.1f}", f"{p['fraction']:.2f}", correction])
+        lines += _columns(rows, right_of=(6,))
     finest = balance['finest_grade_met']
-    verdict = 'WITHIN' if balance['within_grade'] else 'OUT OF'
     lines.append(f"achieved: G {balance['equivalent_grade']:.3g} mm/s (finest standard grade met: "
-                 f"{'G %g' % finest if finest else 'none'}) -> {verdict} G {balance['grade']:g}")
+                 f"{'G %g' % finest if finest else 'none'}) -> {balance['verdict']}")
     return '\n'.join(lines)
+
+
+def _columns(rows, left=1, right_of=()):
+    """
+    Lay out ``rows`` of text cells in columns at least two spaces apart.
+
+    The first ``left`` columns and those in ``right_of`` are left-aligned, the
+    others (numbers) right-aligned; widths follow the widest cell, so large
+    values never run into their neighbours.
+    """
+    widths = [max(len(row[i]) for row in rows if i < len(row)) for i in range(len(rows[0]))]
+    lines = []
+    for row in rows:
+        cells = [cell.ljust(width) if i < left or i in right_of else cell.rjust(width)
+                 for i, (cell, width) in enumerate(zip(row, widths))]
+        lines.append('  '.join(cells).rstrip())
+    return lines
 
 
 def _vec(values, spec):

@@ -23,6 +23,14 @@ Signs:
 
 Angles are radians everywhere inside the code; degrees only at the edges
 (layout files may say ``angle_deg``; the command line prints degrees).
+
+Units for people: unbalance is printed in g mm (static, per plane) and g mm^2
+(couple), as balancing practice and ISO 21940 quote them; :func:`g_mm` and
+:func:`g_mm2` convert from SI (1 kg m = 10^6 g mm, 1 kg m^2 = 10^9 g mm^2).
+
+For drawing: the **lab** frame has gravity along -Y; :func:`stator_tilt` turns
+the stator into it (a gantry tilted about stator X by beta has gravity
+(0, -g cos beta, g sin beta) in the stator frame).
 """
 
 import math
@@ -92,6 +100,45 @@ def wrap_angle(angle):
 def polar(x, y):
     """Amount and angle (rad, from X toward Y) of a planar vector."""
     return math.hypot(x, y), math.atan2(y, x)
+
+
+G_MM_PER_KG_M = 1e6
+"""g mm in one kg m (10^3 g times 10^3 mm)."""
+
+G_MM2_PER_KG_M2 = 1e9
+"""g mm^2 in one kg m^2 (10^3 g times 10^6 mm^2)."""
+
+
+def g_mm(kg_m):
+    """Unbalance (or any mass times length) from kg m to g mm, for people."""
+    return kg_m * G_MM_PER_KG_M
+
+
+def g_mm2(kg_m2):
+    """Couple unbalance (mass times length squared) from kg m^2 to g mm^2, for people."""
+    return kg_m2 * G_MM2_PER_KG_M2
+
+
+def stator_tilt(gravity):
+    """
+    Rotation (unit axis, angle rad) from the stator frame to the lab frame.
+
+    The lab frame has gravity along -Y; the rotation is the smallest one that
+    turns ``gravity`` (m/s^2, stator frame) onto -Y: about stator X by beta
+    for a gantry tilted by beta. No gravity (or gravity along -Y already):
+    no rotation. Gravity along +Y: half a turn about X.
+    """
+    g_x, g_y, g_z = (float(v) for v in gravity)
+    size = math.sqrt(g_x * g_x + g_y * g_y + g_z * g_z)
+    if size == 0.0:
+        return (1.0, 0.0, 0.0), 0.0
+    a_x, a_y, a_z = g_x / size, g_y / size, g_z / size
+    # axis = a x (0, -1, 0) = (a_z, 0, -a_x); cos(angle) = a . (0, -1, 0) = -a_y
+    sin_angle = math.hypot(a_z, a_x)
+    angle = math.atan2(sin_angle, -a_y)
+    if sin_angle < 1e-15:
+        return (1.0, 0.0, 0.0), angle
+    return (a_z / sin_angle, 0.0, -a_x / sin_angle), angle
 
 
 def degrees(angle):

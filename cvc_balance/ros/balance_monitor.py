@@ -13,12 +13,18 @@ receive times), ``layout`` (std_msgs/String, YAML or JSON, transient local).
 Publications (geometry_msgs/WrenchStamped, stamp = input sample's stamp):
 ``bearing_load`` and ``supports/<name>/load`` (stator frame, N and N m),
 ``unbalance`` (rotor frame: force = U omega^2, torque = couple moment),
-``drive_torque`` (rotor frame, torque.z). ``/diagnostics`` at a fixed
-period: the ISO 21940-11 verdict at the current speed and the node's counts.
+``drive_torque`` (rotor frame, torque.z). ``/diagnostics`` every period and at
+each layout change: the ISO 21940-11 verdict (one definition,
+:func:`cvc_balance.physics.assessment.judge_balance`: at the layout's service
+speed, or the top speed seen), the layout's plausibility warnings, the node's
+counts; STALE when no motion sample came for ``stale_after`` seconds. Changes
+of that level are logged once each (WARN and STALE as warnings, ERROR as an
+error, back to OK as info).
 """
 
 import math
 import sys
+from time import monotonic
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -32,18 +38,23 @@ from std_msgs.msg import Float64, String
 
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import WrenchStampedEncoder
-from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics import assessment
 from cvc_balance.physics.engine import RotorModel, sample_loads
-from cvc_balance.physics.frames import degrees, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.physics.frames import degrees, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout import LayoutError
 from cvc_balance.physics.layout_file import layout_from_text, load_layout
 from cvc_balance.physics.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import BagRecorder
 
 THROTTLE_S = 1.0
+LEVELS = {assessment.OK: DiagnosticStatus.OK, assessment.NOT_JUDGED: DiagnosticStatus.OK,
+          assessment.WARN: DiagnosticStatus.WARN, assessment.ERROR: DiagnosticStatus.ERROR}
+LEVEL_NAMES = {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
+               DiagnosticStatus.ERROR: 'ERROR', DiagnosticStatus.STALE: 'STALE'}
 
 
 PARAMETERS = (
@@ -58,11 +69,13 @@ PARAMETERS = (
      'estimates alpha from omega', (1e-4, 100.0)),
     ('balance_grade', 0.0, "ISO 21940-11 grade G (mm/s) for the diagnostics; 0: the "
      "layout's balancing.grade", (0.0, 4000.0)),
-    ('warn_fraction', 0.8, 'WARN when the achieved grade exceeds this fraction of the '
-     'grade (ERROR beyond the grade)', (0.01, 1.0)),
+    ('warn_fraction', assessment.WARN_FRACTION, 'WARN when the achieved grade exceeds this '
+     'fraction of the grade (ERROR beyond the grade)', (0.01, 1.0)),
     ('max_speed', 1000.0, 'absolute speeds above this (rad/s) are rejected as absurd',
      (1e-3, 1e5)),
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
+    ('stale_after', 2.0, '/diagnostics says STALE when no motion sample was accepted for '
+     'this long (s)', (0.01, 3600.0)),
     ('input_depth', 200, 'history depth of the best-effort joint_states and speed '
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
@@ -85,6 +98,7 @@ class ActiveLayout:
         self.digest = layout.digest()
         self.static = static_unbalance(self.model)
         self.couple = couple_unbalance(self.model)
+        self.warnings = layout_warnings(layout)
         self.supports = tuple(
             (s.name, node.publisher(topics.support_load(s.name))) for s in layout.supports)
 
@@ -111,6 +125,11 @@ class BalanceMonitor(Node):
         self._omega = 0.0
         self._counts = {'accepted': 0, 'rejected': 0, 'dropped': 0}
         self._period_accepted = 0
+        self._period_start = monotonic()
+        self._started = self._period_start
+        self._last_input = None     # monotonic s of the last accepted motion sample
+        self._top_speed = 0.0       # top |omega| accepted under the layout in force
+        self._reported_level = None
         self._peak_load = 0.0
         self._last_rejection = ''
         self._layout_error = ''
@@ -130,7 +149,7 @@ class BalanceMonitor(Node):
                                                    name=self.get_fully_qualified_name()),
                                     every=self.params['rerun_every'])
             if self._active is not None:
-                self._rerun.layout(0, self._active.model)
+                self._rerun.layout(None, self._active.model)   # at the first sample
         self._recorder = None
         self._record = {}
         if self.params['record_path']:
@@ -225,6 +244,10 @@ class BalanceMonitor(Node):
         if self._rerun is not None:
             self._rerun.sample(sec * 1_000_000_000 + nanosec, angle, omega, alpha, result)
         self._omega = omega
+        speed = omega if omega >= 0.0 else -omega
+        if speed > self._top_speed:
+            self._top_speed = speed
+        self._last_input = monotonic()
         self._counts['accepted'] += 1
         self._period_accepted += 1
 
@@ -270,13 +293,22 @@ class BalanceMonitor(Node):
             self._refuse_layout(f'{source}: {error}')
             return
         self._active = active  # one reference swap: takes effect between two samples
+        self._top_speed = 0.0
+        if self._last_input is None:    # STALE counts from the first layout, not the start
+            self._started = monotonic()
         self._layout_error = ''
         if getattr(self, '_rerun', None) is not None:
             # On the samples' time line: from the last sample on.
-            self._rerun.layout(int((self._last_time or 0.0) * 1e9), active.model)
+            self._rerun.layout(None if self._last_time is None
+                               else int(self._last_time * 1e9), active.model)
         self.get_logger().info(f"layout '{layout.name}' ({active.digest}) from {source}: "
                                f'{len(layout.components)} components, '
                                f'{active.model.mass:.3f} kg')
+        for warning in active.warnings:
+            self.get_logger().warning(f"layout '{layout.name}': implausible? {warning}")
+        if getattr(self, '_diagnostics_pub', None) is not None and \
+                self.context.ok():
+            self._publish_diagnostics()   # the new verdict at once, not a period later
 
     def _refuse_layout(self, reason):
         self._layout_error = reason
@@ -287,57 +319,94 @@ class BalanceMonitor(Node):
     # -- diagnostics -----------------------------------------------------------------
 
     def _publish_diagnostics(self):
+        now = monotonic()
         status = DiagnosticStatus(name='balance_monitor: rotor balance',
                                   hardware_id=self.get_fully_qualified_name())
         values = {'accepted': self._counts['accepted'], 'rejected': self._counts['rejected'],
                   'dropped': self._counts['dropped'],
-                  'input rate [Hz]': self._period_accepted / self.params['diagnostics_period'],
+                  'input rate [Hz]': self._period_accepted / max(now - self._period_start, 1e-9),
                   'peak bearing load [N]': math.sqrt(self._peak_load),
                   'last rejected input': self._last_rejection,
                   'last rejected layout': self._layout_error}
-        self._period_accepted, self._peak_load = 0, 0.0
+        self._period_accepted, self._peak_load, self._period_start = 0, 0.0, now
         active = self._active
         if active is None:
-            status.level, status.message = DiagnosticStatus.WARN, 'no layout'
+            level, message = DiagnosticStatus.WARN, 'no layout (waiting for one on the ' \
+                f'{topics.LAYOUT} topic)'
         else:
             level, message, balance = self._judge(active)
-            status.level, status.message = level, message
             values.update(balance)
+            quiet = now - (self._last_input if self._last_input is not None else self._started)
+            values['last motion sample [s ago]'] = quiet if self._last_input is not None else ''
+            if quiet > self.params['stale_after']:
+                waited = 'no motion sample yet' if self._last_input is None else \
+                    f'no motion sample for {quiet:.1f} s'
+                level, message = DiagnosticStatus.STALE, \
+                    f"{waited} on {topics.JOINT_STATES} or {topics.SPEED} (stale after " \
+                    f"{self.params['stale_after']:g} s); {message}"
         if self._layout_error:
-            status.message += f'; last layout rejected: {self._layout_error}'
+            message += f'; last layout rejected: {self._layout_error}'
+        status.level, status.message = level, message
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics_pub.publish(array)
+        self._log_transition(level, message)
+
+    def _log_transition(self, level, message):
+        """Log a change of the diagnostics level, once (not every period)."""
+        if level == self._reported_level:
+            return
+        self._reported_level = level
+        logger = self.get_logger()
+        text = f'balance {LEVEL_NAMES.get(level, level)}: {message}'
+        if level == DiagnosticStatus.ERROR:
+            logger.error(text)
+        elif level in (DiagnosticStatus.WARN, DiagnosticStatus.STALE):
+            logger.warning(text)
+        else:
+            logger.info(text)
 
     def _judge(self, active):
+        """Diagnostics level, message and values of the layout in force."""
         layout = active.layout
         grade = self.params['balance_grade'] or layout.balancing.grade
-        omega = abs(self._omega)
+        verdict = assessment.judge_balance(active.model, self._top_speed, grade,
+                                           self.params['warn_fraction'])
         values = {'layout': layout.name, 'layout digest': active.digest,
-                  'speed [rad/s]': omega, 'grade [mm/s]': grade}
-        if omega <= 0.0:
-            return DiagnosticStatus.OK, 'rotor at rest: balance grade not judged', values
-        assessment = assess_balance(active.model, omega, grade)
-        values.update({'static unbalance [g mm]': assessment.static_amount * 1e6,
-                       'static unbalance angle [deg]': degrees(assessment.static_angle),
-                       'couple unbalance [g mm^2]': assessment.couple_amount * 1e6,
-                       'couple unbalance angle [deg]': degrees(assessment.couple_angle)})
-        for label, plane, allowed in zip(('I', 'II'), assessment.planes,
-                                         assessment.plane_permissible):
-            values.update({f'plane {label} z [m]': plane.z,
-                           f'plane {label} unbalance [g mm]': plane.amount * 1e6,
-                           f'plane {label} angle [deg]': degrees(plane.angle),
-                           f'plane {label} permissible [g mm]': allowed * 1e6})
-        achieved = assessment.equivalent_grade
-        values['achieved grade [mm/s]'] = achieved
-        if achieved > grade:
-            level, verdict = DiagnosticStatus.ERROR, 'out of'
-        elif achieved > self.params['warn_fraction'] * grade:
-            level, verdict = DiagnosticStatus.WARN, 'near the limit of'
-        else:
-            level, verdict = DiagnosticStatus.OK, 'within'
-        return level, f'G {achieved:.3g} at {omega:.4g} rad/s: {verdict} G {grade:g}', values
+                  'speed [rad/s]': abs(self._omega), 'top speed seen [rad/s]': self._top_speed,
+                  'grade [mm/s]': grade, 'verdict level': verdict.level,
+                  'verdict': verdict.text}
+        judged = verdict.assessment
+        if judged is not None:
+            values.update({'judged at [rad/s]': judged.omega,
+                           'judged at': verdict.speed_source,
+                           'achieved grade [mm/s]': judged.equivalent_grade,
+                           'static unbalance [g mm]': g_mm(judged.static_amount),
+                           'static unbalance angle [deg]': degrees(judged.static_angle),
+                           'couple unbalance [g mm^2]': g_mm2(judged.couple_amount),
+                           'couple unbalance angle [deg]': degrees(judged.couple_angle),
+                           'permissible [g mm]': g_mm(judged.permissible)})
+            for label, plane, allowed, fraction in zip(('I', 'II'), judged.planes,
+                                                       judged.plane_permissible,
+                                                       judged.fractions):
+                values.update({f'plane {label} z [m]': plane.z,
+                               f'plane {label} unbalance [g mm]': g_mm(plane.amount),
+                               f'plane {label} angle [deg]': degrees(plane.angle),
+                               f'plane {label} permissible [g mm]': g_mm(allowed),
+                               f'plane {label} unbalance / permissible': fraction,
+                               f'plane {label} correction mass [g]':
+                                   'none (no correction radius)' if plane.correction_mass is None
+                                   else plane.correction_mass * 1e3,
+                               f'plane {label} correction angle [deg]':
+                                   degrees(plane.correction_angle)})
+        level, message = LEVELS[verdict.level], verdict.text
+        values['layout warnings'] = ' | '.join(active.warnings)
+        if active.warnings:
+            message += f'; layout implausible? {len(active.warnings)} warning(s): ' \
+                f'{active.warnings[0]}'
+            level = max(level, DiagnosticStatus.WARN)
+        return level, message, values
 
     def _declare_parameters(self):
         values = {}
@@ -359,9 +428,50 @@ def _text(value):
     return f'{value:.6g}' if isinstance(value, float) else str(value)
 
 
+def usage():
+    """Return the node's --help: what it does, its topics and parameters."""
+    lines = ['usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] [--params-file FILE] '
+             '[-r FROM:=TO] ...]',
+             '',
+             'ROS 2 node balance_monitor: bearing loads, drive torque and unbalance of a rotor',
+             'from its encoder (joint_states or speed) and its component layout, with the',
+             'ISO 21940-11 verdict on /diagnostics. Runs until SIGINT or SIGTERM.',
+             '',
+             f'inputs: {topics.JOINT_STATES} (sensor_msgs/JointState), {topics.SPEED} '
+             f'(std_msgs/Float64), {topics.LAYOUT} (std_msgs/String, latched)',
+             f'outputs: {topics.BEARING_LOAD}, supports/<name>/load, {topics.UNBALANCE}, '
+             f'{topics.DRIVE_TORQUE} (geometry_msgs/WrenchStamped), {topics.DIAGNOSTICS}',
+             '',
+             'parameters (-p NAME:=VALUE after --ros-args; config/balance_monitor.yaml):']
+    for name, default, description, bounds in PARAMETERS:
+        limits = f', {bounds[0]:g} to {bounds[1]:g}' if bounds else ''
+        lines.append(f'  {name} (default {default!r}{limits}): {description}')
+    return '\n'.join(lines)
+
+
 def main(args=None):
-    """Run the node until SIGINT or SIGTERM; returns the exit code (2: bad parameter)."""
-    rclpy.init(args=args)
+    """
+    Run the node until SIGINT or SIGTERM; returns the exit code.
+
+    ``-h``/``--help`` print :func:`usage` and return 0 without starting ROS; an
+    argument before ``--ros-args`` that is not one of those is bad input (2), as is a
+    bad parameter.
+    """
+    argv = list(sys.argv if args is None else args)
+    own = argv[1:argv.index('--ros-args')] if '--ros-args' in argv else argv[1:]
+    if '-h' in argv[1:] or '--help' in argv[1:]:      # also after --ros-args
+        print(usage())
+        return 0
+    if own:
+        print(f'balance_monitor: error: unexpected argument {own[0]!r} (ROS arguments go '
+              'after --ros-args; see --help)', file=sys.stderr)
+        return 2
+    try:
+        rclpy.init(args=argv)
+    except Exception as error:      # rclpy's UnknownROSArgsError, RCLError: bad ROS arguments
+        print(f'balance_monitor: error: bad ROS arguments: {error} (see --help)',
+              file=sys.stderr)
+        return 2
     try:
         node = BalanceMonitor()
     except (ParameterException, ValueError) as error:   # ValueError: e.g. the rerun mode

@@ -9,12 +9,18 @@ next sample. With ``-o`` the node's outputs (topics derived from the bag's
 layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
 1 s after the last input. Samples start once the node subscribes to them, the
 recorder has matched the node's outputs, and 1.5 s more (DDS discovery is
-one-sided: the other end may match a moment later).
+one-sided: the other end may match a moment later). Each wait says what it waits
+for and gives up after ``wait`` seconds with a :class:`PlayError` naming it.
+
+While playing it listens to ``/diagnostics`` and, at the end, reports the node's
+own verdict per layout (the last status it published for each layout digest).
 """
 
+import select
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 from cvc_balance.bag.inputs import input_channels, InputTopics
@@ -25,6 +31,12 @@ from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
 from cvc_balance.ros.recorder import message_class
 
 LAYOUT_PAUSE = 0.05
+WAIT = 20.0
+"""Default time (s) to wait for the node and the recorder before giving up."""
+
+
+class PlayError(RuntimeError):
+    """Nothing to play into (no node, no recorder); ``str()`` says what was waited for."""
 
 
 def output_topics(layout_texts):
@@ -44,15 +56,21 @@ def output_topics(layout_texts):
     return names
 
 
-def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, settle=1.5,
+def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=print,
          names=None):
     """
-    Publish the bag's inputs; return (messages published, recorder's report or None).
+    Publish the bag's inputs; return (messages published, recorder's report, verdicts).
 
     ``bag_path``: a bag file or rosbag2 directory; ``names`` (InputTopics): its input
     topics if not the node's own. They are published on the node's topic names.
+
+    ``verdicts``: {layout digest: {key: value}} of the last /diagnostics status the node
+    published for each layout, in the order first seen. Raises :class:`PlayError` when
+    no node subscribes to the motion topic, or the recorder does not match the node's
+    outputs, within ``wait`` s.
     """
     import rclpy
+    from rclpy.executors import SingleThreadedExecutor
 
     bag = open_bag(bag_path)
     channels = input_channels(bag, names)      # BagError names the bag's topics
@@ -65,54 +83,126 @@ def play(bag_path, rate=1.0, output=None, wait_for_subscriber=20.0, quiet=1.0, s
         if channel is not None:
             inputs.append((topic, msg_type, qos, bag.messages(channel)))
     for problem in bag.problems:
-        print(f'play: {bag_path}: {problem}')
+        say(f'play: {bag_path}: {problem}')
     layouts = [data for topic, _, _, messages in inputs if topic == topics.LAYOUT
                for _, data in messages]
     outputs = output_topics([read_string_message(data) for data in layouts])
     rclpy.init()
     node = rclpy.create_node('cvc_balance_player')
-    publishers = {topic: node.create_publisher(message_class(msg_type), topic, qos)
-                  for topic, msg_type, qos, _ in inputs}
-    events = sorted((log_time, topic, data) for topic, _, _, messages in inputs
-                    for log_time, data in messages)
-    # The recorder runs in its own process: its thousands of callbacks a second must not
-    # starve this one's timing (bursts would overflow the node's input queue).
+    verdicts = VerdictLog(node)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
+    spinner.start()
     recorder = None
-    if output:
-        recorder = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'record', '-o',
-                                     str(output), '--ready-when', outputs[0], *outputs],
-                                    stdout=subprocess.PIPE, text=True)
-    motion = topics.JOINT_STATES if topics.JOINT_STATES in publishers else topics.SPEED
-    if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait_for_subscriber):
-        print(f'play: nobody subscribes to {motion}; publishing anyway')
-    first_sample = next(i for i, (_, topic, _) in enumerate(events) if topic != topics.LAYOUT)
-    for log_time, topic, data in events[:first_sample]:
-        publishers[topic].publish(data)          # the layouts in force from the start
-    if recorder is not None and recorder.stdout.readline().strip() != 'ready':
-        print('play: the recorder did not get ready; recording anyway')
-    if first_sample and outputs[3:]:     # the first layout's supports are being published
-        _wait(lambda: node.count_publishers(outputs[3]) > 0, wait_for_subscriber)
-    # DDS matching is one-sided: what this side sees, the other may see a moment later.
-    time.sleep(settle)
-    published, start_log = first_sample, events[first_sample][0]
-    start_wall = time.monotonic()
-    for log_time, topic, data in events[first_sample:]:
-        left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
-        if left > 0:
-            time.sleep(left)
-        publishers[topic].publish(data)
-        published += 1
-        if topic == topics.LAYOUT:
-            time.sleep(LAYOUT_PAUSE)
-            start_wall += LAYOUT_PAUSE
-    report = None
-    if recorder is not None:
-        time.sleep(quiet)
-        recorder.send_signal(signal.SIGINT)
-        report = recorder.communicate(timeout=30)[0].strip()
-    node.destroy_node()
-    rclpy.try_shutdown()
-    return published, report
+    try:
+        publishers = {topic: node.create_publisher(message_class(msg_type), topic, qos)
+                      for topic, msg_type, qos, _ in inputs}
+        events = sorted((log_time, topic, data) for topic, _, _, messages in inputs
+                        for log_time, data in messages)
+        motion = topics.JOINT_STATES if topics.JOINT_STATES in publishers else topics.SPEED
+        name = node.resolve_topic_name(motion)
+        say(f'play: waiting up to {wait:g} s for a node subscribed to {name} '
+            '(balance_monitor)', flush=True)
+        if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait):
+            raise PlayError(f'no node subscribed to {name} within {wait:g} s: start the '
+                            'balance_monitor node first (./dev.sh demo does), or wait longer '
+                            'with --wait')
+        subscribers = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                              for i in node.get_subscriptions_info_by_topic(name)
+                              if 'UNKNOWN' not in i.node_name})
+        say(f"play: {name} is subscribed"
+            + (f" by {', '.join(subscribers)}" if subscribers else ''), flush=True)
+        # The recorder runs in its own process: its thousands of callbacks a second must
+        # not starve this one's timing (bursts would overflow the node's input queue).
+        # Started once a node is there, so that giving up leaves no empty file behind.
+        if output:
+            recorder = subprocess.Popen(
+                [sys.executable, '-m', 'cvc_balance.cli', 'record', '-o', str(output),
+                 '--ready-when', outputs[0], *outputs, topics.DIAGNOSTICS],
+                stdout=subprocess.PIPE, text=True)
+        first_sample = next(i for i, (_, topic, _) in enumerate(events)
+                            if topic != topics.LAYOUT)
+        for log_time, topic, data in events[:first_sample]:
+            publishers[topic].publish(data)          # the layouts in force from the start
+        if recorder is not None:
+            say(f'play: waiting up to {wait:g} s for the recorder to match the node\'s '
+                f'{node.resolve_topic_name(outputs[0])} output', flush=True)
+            if _read_line(recorder.stdout, wait) != 'ready':
+                raise PlayError(f'the recorder saw no publisher of '
+                                f'{node.resolve_topic_name(outputs[0])} within {wait:g} s: '
+                                'is the node running with a layout?')
+        if first_sample and outputs[3:]:     # the first layout's supports are being published
+            _wait(lambda: node.count_publishers(outputs[3]) > 0, wait)
+        # DDS matching is one-sided: what this side sees, the other may see a moment later.
+        time.sleep(settle)
+        published, start_log = first_sample, events[first_sample][0]
+        start_wall = time.monotonic()
+        for log_time, topic, data in events[first_sample:]:
+            left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
+            if left > 0:
+                time.sleep(left)
+            publishers[topic].publish(data)
+            published += 1
+            if topic == topics.LAYOUT:
+                time.sleep(LAYOUT_PAUSE)
+                start_wall += LAYOUT_PAUSE
+        time.sleep(quiet)          # the last outputs, and the node's verdict, come back
+        report = None
+        if recorder is not None:
+            recorder.send_signal(signal.SIGINT)
+            report = recorder.communicate(timeout=30)[0].strip()
+            recorder = None
+        return published, report, verdicts.latest()
+    finally:
+        if recorder is not None:          # given up: the recorder we started goes too
+            recorder.send_signal(signal.SIGINT)
+            try:
+                recorder.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                recorder.kill()
+                recorder.communicate()
+        executor.shutdown()
+        spinner.join(timeout=5)
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+class VerdictLog:
+    """The balance_monitor's /diagnostics, kept per layout digest (last status wins)."""
+
+    def __init__(self, node):
+        """Subscribe ``node`` to /diagnostics."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        self._by_digest = {}
+        self._lock = threading.Lock()
+        node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_array, 50)
+
+    def _on_array(self, array):
+        for status in array.status:
+            values = {kv.key: kv.value for kv in status.values}
+            digest = values.get('layout digest')
+            if digest and values.get('verdict level'):
+                with self._lock:
+                    self._by_digest[digest] = values
+
+    def latest(self):
+        """{layout digest: diagnostics values}, in the order the layouts were first seen."""
+        with self._lock:
+            return dict(self._by_digest)
+
+
+def _spin(executor):
+    try:
+        executor.spin()
+    except Exception:   # shut down while waiting (the context went first)
+        pass
+
+
+def _read_line(stream, timeout):
+    """One line of ``stream`` (stripped), or '' at its end or after ``timeout`` s."""
+    ready, _, _ = select.select([stream], [], [], timeout)
+    return stream.readline().strip() if ready else ''
 
 
 def _wait(condition, timeout):
@@ -125,11 +215,28 @@ def _wait(condition, timeout):
 
 
 def play_main(args):
-    """Run ``cvc-balance play``; return the exit code."""
+    """Run ``cvc-balance play``; return the exit code (1: nothing to play into)."""
     names = InputTopics(getattr(args, 'joint_states', None), getattr(args, 'speed', None),
                         getattr(args, 'layout', None))
-    published, report = play(args.bag, args.rate, args.output, names=names)
+    try:
+        published, report, verdicts = play(args.bag, args.rate, args.output, args.wait,
+                                           names=names)
+    except PlayError as error:
+        print(f'cvc-balance: error: play: {error}', file=sys.stderr)
+        return 1
     print(f'{args.bag}: published {published} messages')
     if report:
         print(f'recorded {report}')
+    print(format_verdicts(verdicts))
     return 0
+
+
+def format_verdicts(verdicts):
+    """Describe the node's verdict per layout, one line each, for people."""
+    if not verdicts:
+        return 'the node published no verdict (/diagnostics) while playing'
+    lines = ["balance_monitor's verdict per layout (its /diagnostics):"]
+    for digest, values in verdicts.items():
+        lines.append(f"  {values.get('layout', '?')} {digest}: "
+                     f"{values.get('verdict level', '?')}  {values.get('verdict', '')}")
+    return '\n'.join(lines)

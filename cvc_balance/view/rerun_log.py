@@ -1,136 +1,422 @@
 """
-The rerun view of a run: the turning gantry, its loads and its unbalance.
+The rerun view of a run, laid out to be read at a glance.
 
-One logger for both paths (the live node and ``cvc-balance view`` of a bag). What it
-logs, on the timeline ``time`` (the samples' stamps):
+One logger for both paths (the live node and ``cvc-balance view`` of a bag), on the
+timeline ``time`` (the samples' stamps). Every panel names its units. What it logs:
 
-* ``world``: the stator ring and supports; ``world/rotor`` turning with q; each
-  component as its shape at (R, theta, z), coloured by its share of the static
-  unbalance (blue: none, red: the largest); the correction planes and where the
-  correction masses go; arrows for the load at each support and the unbalance force.
-* ``plots``: omega, alpha, drive torque, each support's load (stator-frame components
-  and magnitude), the unbalance per plane against the grade's limit at the current speed.
-* ``polar/<plane>``: the unbalance vector per correction plane with its tolerance circle.
-* ``events``: layout changes; ``verdict``: the grade verdict.
+* ``world`` (the lab: gravity along -Y, ``frames.stator_tilt``): ``world/stator``
+  tilted as the gantry is, with its ring, supports and an arrow for the load at each
+  support (20 kN per metre, labelled in kN); ``world/stator/rotor`` turning with q,
+  each component as its shape at (R, theta, z), the component a layout change
+  touched highlighted (and named with what changed), labels only where they do not
+  crowd a more important one (``LABEL_SPACING``), the correction planes with the
+  correction masses, and the static unbalance's force U omega^2 (200 N per metre).
+* ``plots``: per correction plane its unbalance as a fraction of its OWN permissible
+  share (1.0 = that plane's limit, at the speed the verdict is judged at, so speed
+  does not squash it); omega and alpha; the drive torque; per support the static
+  weight beside the rotating part's amplitude and the peak over a turn
+  (:mod:`cvc_balance.physics.load_parts`).
+* ``polar/<plane>``: a polar diagram per plane in the same fractions: angle grid,
+  the 0 deg mark (rotor X), angles counter-clockwise as in the rotor frame (rerun's
+  2D views point Y down, so points are drawn at (x, -y)), the tolerance circle
+  labelled with its g mm, the unbalance and the correction vector, labels placed
+  apart.
+* ``verdict_level`` (coloured lanes: OK green, WARN amber, ERROR red), ``verdict``
+  (the verdict of :func:`cvc_balance.physics.assessment.judge_balance`, the same as
+  the node's diagnostics, ``solve`` and ``replay``), ``events`` (layout changes,
+  plausibility warnings, verdicts, coloured by level).
 
-Units: SI in the 3D view (m; arrows scaled, see ``NEWTONS_PER_METRE``), g mm and degrees
-where people read them. The rerun SDK is imported here only (an adapter).
+The rerun SDK is imported here only (an adapter).
 """
 
+import datetime
 import math
 from types import SimpleNamespace
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+import rerun.blueprint.encodings as rre
 
-from cvc_balance.physics.assessment import assess_balance
-from cvc_balance.physics.iso21940 import permissible_unbalance
-from cvc_balance.physics.unbalance import static_unbalance, unbalance_wrench
+from cvc_balance.physics import assessment
+from cvc_balance.physics.assessment import assess_balance, judge_balance, WARN_FRACTION
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.frames import degrees, g_mm, stator_tilt
+from cvc_balance.physics.load_parts import support_load_parts
+from cvc_balance.physics.plausibility import layout_warnings
+from cvc_balance.physics.unbalance import plane_unbalances, static_unbalance, unbalance_wrench
 
 TIMELINE = 'time'
 NEWTONS_PER_METRE = 20000.0
 """Support load arrows: 20 kN per metre of arrow."""
 UNBALANCE_NEWTONS_PER_METRE = 200.0
 """Unbalance force arrow: 200 N per metre (a balanced gantry's is tens of newtons)."""
+LONGEST_ARROW = 1.0
+"""m: longer arrows are drawn this long (their label or plot gives the value)."""
 PLANES = ('plane_I', 'plane_II')
 STATOR_RING_RADIUS = 0.85      # m, drawn for orientation
 VIEW_PIXELS = 500
 """Pixels across the rotor in a typical 3D view: a shape under two of them is a point."""
+LABEL_SPACING = 0.4
+"""m: a 3D label this close to a more important one is left out (hover shows the name)."""
+POLAR_REACH = 1.4
+"""Longest vector drawn in the polar views (fraction of the limit); its label gives more."""
+POLAR_BOUNDS = (2.0, 2.35)
+"""Half-width and half-height of the polar views (fractions of the limit)."""
+POLAR_TEXT_ROW = 1.95
+"""Where the polar views write the vectors' values: above and below the grid."""
+
+LEVEL_COLOURS = {assessment.OK: (60, 180, 90), assessment.WARN: (245, 170, 30),
+                 assessment.ERROR: (235, 60, 60), assessment.NOT_JUDGED: (140, 140, 140)}
+LOG_LEVELS = {assessment.OK: 'INFO', assessment.WARN: 'WARN', assessment.ERROR: 'ERROR',
+              assessment.NOT_JUDGED: 'INFO'}
+PLANE_COLOURS = {'plane_I': (80, 170, 255), 'plane_II': (255, 120, 200),
+                 'static': (80, 170, 255)}
+COMPONENT_COLOUR = (120, 135, 160)
+CHANGED_COLOUR = (255, 215, 0)
+CORRECTION_COLOUR = (60, 200, 90)
+LOAD_COLOUR = (255, 150, 30)
+UNBALANCE_COLOUR = (235, 60, 60)
+GRID_COLOUR = (90, 90, 100)
+SUPPORT_COLOURS = ((80, 170, 255), (255, 150, 30), (180, 120, 255))
 
 
-def blueprint(support_names):
-    """Arrange the views: 3D left, plots in the middle, polar and text right."""
-    plots = [rrb.TimeSeriesView(origin='plots/speed', name='omega, alpha'),
-             rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque'),
-             rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance vs limit')]
-    plots += [rrb.TimeSeriesView(origin=f'plots/supports/{name}', name=f'{name} load')
-              for name in support_names]
-    return rrb.Blueprint(rrb.Horizontal(
-        rrb.Spatial3DView(origin='world', name='gantry'),
-        rrb.Vertical(*plots),
-        rrb.Vertical(rrb.Spatial2DView(origin='polar', name='unbalance per plane (g mm)'),
-                     rrb.TextDocumentView(origin='verdict', name='verdict'),
-                     rrb.TextLogView(origin='events', name='events')),
-        column_shares=[3, 3, 2]))
+EVENT_COLUMNS = rrb.TextLogColumns(
+    timeline_columns=[rre.TimelineColumn(TIMELINE, visible=False),
+                      rre.TimelineColumn('log_time', visible=False)],
+    text_log_columns=[rre.TextLogColumn('EntityPath', visible=False),
+                      rre.TextLogColumn('LogLevel'), rre.TextLogColumn('Body')])
+
+
+def plane_keys(layout):
+    """Entity names of the judged planes: plane_I, plane_II, or 'static' without planes."""
+    return PLANES if layout.correction_planes() is not None else ('static',)
+
+
+def blueprint(support_names, planes=PLANES, static_range=None):
+    """
+    Arrange the views: 3D and polar left, plots in the middle, verdict and events right.
+
+    ``static_range`` (N, N): the static weight plot's axis (a constant line would
+    otherwise be fitted to its rounding).
+    """
+    plots = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
+                                   '(ISO 21940-11: OK, WARN, ERROR)'),
+             rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its '
+                                'permissible share [1 = limit]',
+                                plot_legend=rrb.PlotLegend('RightBottom')),
+             rrb.TimeSeriesView(origin='plots/speed', name='speed ω [rad/s], '
+                                'acceleration α [rad/s²]', plot_legend=rrb.PlotLegend('LeftTop')),
+             rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque [N m]',
+                                plot_legend=rrb.PlotLegend('RightTop'))]
+    plots += [rrb.TimeSeriesView(origin='plots/load_rotating', name='rotating load amplitude '
+                                 'per support [N] (unbalance at speed)',
+                                 plot_legend=rrb.PlotLegend('LeftTop')),
+              rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
+                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('RightBottom'),
+                                 axis_y=rrb.ScalarAxis(range=list(static_range))
+                                 if static_range else None)]
+    bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
+                                y_range=[-POLAR_BOUNDS[1], POLAR_BOUNDS[1]])
+    polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
+                               visual_bounds=bounds) for key in planes]
+    gantry = rrb.Spatial3DView(
+        origin='world', name='gantry, lab frame [m]; arrows: load 20 kN/m, unbalance 200 N/m',
+        eye_controls=rrb.EyeControls3D(position=[0.75, 0.55, 2.0], look_target=[0.0, -0.1, 0.0],
+                                       eye_up=[0.0, 1.0, 0.0]),
+        line_grid=rrb.LineGrid3D(visible=True, spacing=0.25,
+                                 plane=rr.components.Plane3D([0.0, 1.0, 0.0], -1.0)))
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(gantry, rrb.Horizontal(*polar), row_shares=[3, 2]),
+            rrb.Vertical(*plots, row_shares=[3] + [4] * (len(plots) - 1)),
+            rrb.Vertical(rrb.TextDocumentView(origin='verdict', name='verdict'),
+                         rrb.TextLogView(origin='events', name='events', columns=EVENT_COLUMNS),
+                         row_shares=[3, 2]),
+            column_shares=[5, 5, 3]),
+        rrb.TimePanel(timeline=TIMELINE, state='collapsed'),
+        rrb.BlueprintPanel(state='collapsed'), rrb.SelectionPanel(state='collapsed'))
+
+
+def _polar_title(key):
+    if key == 'static':
+        return 'static [U / U_per]'
+    return f'plane {key[6:]} [U / U_per,{key[6:]}]'
 
 
 class RunLogger:
     """Log a run to a rerun recording (see the module's description)."""
 
-    def __init__(self, recording, every=1, service_speed=None):
-        """Log to ``recording`` (a rerun.RecordingStream); arrows every ``every``-th sample."""
+    def __init__(self, recording, every=1, grade=None, warn_fraction=WARN_FRACTION):
+        """
+        Log to ``recording`` (a rerun.RecordingStream); arrows every ``every``-th sample.
+
+        ``grade`` (mm/s, default each layout's) and ``warn_fraction`` as the node's.
+        """
         self.rec = recording
         self.every = every
-        self.service_speed = service_speed
-        self._model = None
-        self._planes = ()
+        self.grade = grade or None
+        self.warn_fraction = warn_fraction
+        self._model = self._full = None
+        self._pending = None
         self._supports = []
+        self._planes = None
         self._count = 0
+        self._top_speed = 0.0
+        self._drawn_top = 0.0
+        self._verdict = None
+        self._unit_fractions = ()     # fractions at 1 rad/s (layouts without a service speed)
+        self._level_code = 0
+        self._static_range = None      # N, the static weight plot's axis
+        self._static_logged = False
+        self._time_ns = 0
+        self._warnings, self._changes = (), {}
 
     def finish(self):
         """Flush and close the recording."""
         self.rec.flush()
         self.rec.disconnect()
 
+    # -- a layout comes into force -------------------------------------------------
+
     def layout(self, time_ns, model):
-        """Draw the rotor of a layout in force from ``time_ns``, and say so."""
+        """
+        Draw the rotor of a layout in force from ``time_ns``, judge it and say so.
+
+        ``time_ns`` None: from the next sample's stamp (the live node before any sample:
+        its stamps, not the wall clock, are the time line).
+        """
+        if time_ns is None:
+            self._pending = model
+            return
+        self._pending = None
         layout = model.layout
-        new = [s.name for s in model.supports if s.name not in self._supports]
-        if new:   # the blueprint has a plot per support: resend it when supports appear
-            self._supports += new
-            self.rec.send_blueprint(blueprint(self._supports))
-        self._model = model
         rec = self.rec
+        previous = self._model.layout if self._model is not None else None
+        planes = plane_keys(layout)
+        new = [s.name for s in model.supports if s.name not in self._supports]
+        at_rest = support_load_parts(model, np.linspace(0.0, 2 * math.pi, 8, endpoint=False),
+                                     0.0, 0.0).static
+        lightest = min(float(v.min()) for v in at_rest.values())
+        heaviest = max(float(v.max()) for v in at_rest.values())
+        shown = self._static_range
+        outside = heaviest > 0.0 and (shown is None or lightest < shown[0]
+                                      or heaviest > shown[1])
+        if new or planes != self._planes or outside:
+            # The blueprint has a polar view per plane and the static weights' axis.
+            self._supports += new
+            self._planes = planes
+            if outside:
+                low, high = 0.75 * lightest, 1.15 * heaviest
+                self._static_range = (low, high) if shown is None else \
+                    (min(low, shown[0]), max(high, shown[1]))
+            rec.send_blueprint(blueprint(self._supports, planes, self._static_range))
+            self._log_styles(new, planes)
+        self._model = model
+        # The verdict is the full model's (replay --tolerance may hand a reduced one).
+        self._full = model if model.own_inertia else RotorModel.from_layout(layout)
+        self._top_speed = self._drawn_top = 0.0
         rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
-        rec.log('world/stator/ring',
-                rr.LineStrips3D([_circle(STATOR_RING_RADIUS, 0.0)], colors=[(150, 150, 150)]))
+        axis, angle = stator_tilt(layout.gravity)
+        rec.log('world/stator', rr.Transform3D(
+            rotation=rr.RotationAxisAngle(axis=axis, radians=angle)))
+        rec.log('world/stator/ring', rr.LineStrips3D(
+            [_circle(STATOR_RING_RADIUS, z) for z in (-0.2, 0.2)], colors=[(150, 150, 150)]))
         rec.log('world/stator/supports', rr.Points3D(
-            [[0.0, 0.0, s.z] for s in layout.supports], radii=0.03,
-            labels=[s.name for s in layout.supports], colors=[(60, 60, 60)]))
-        shares = [c.mass * c.radius for c in layout.components]
-        top = max(shares) or 1.0
-        rec.log('world/rotor/components', rr.Clear(recursive=True))
+            [[0.0, 0.0, s.z] for s in layout.supports], radii=0.03, colors=[(200, 200, 200)]))
+        changes = describe_changes(previous, layout)
+        self._draw_rotor(model, changes)
+        warnings = layout_warnings(layout)
+        moved = '; '.join(f'{name}: {change}' for name, change in changes.items())
+        self._time_ns = time_ns
+        self._event(f'layout {layout.name} {layout.digest()}'
+                    + (f': {moved}' if moved and previous is not None else ''), 'INFO')
+        for warning in warnings:
+            self._event(f'implausible? {warning}', 'WARN', LEVEL_COLOURS[assessment.WARN])
+        self._warnings = warnings
+        self._changes = changes if previous is not None else {}
+        self._unit_fractions, self._level_code = (), 0
+        if layout.balancing.service_speed is None:
+            self._unit_fractions = assess_balance(self._full, 1.0, self._grade()).fractions
+        self._judge(0.0)
+
+    def _grade(self):
+        return self.grade or self._model.layout.balancing.grade
+
+    def _log_styles(self, supports, planes):
+        rec = self.rec
+        if not self._static_logged:
+            self._static_logged = True
+            rec.log('world', rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+            rec.log('world/gravity', rr.Arrows3D(
+                origins=[[1.05, 0.35, 0.0]], vectors=[[0.0, -0.3, 0.0]], labels=['g'],
+                colors=[(200, 200, 200)]), static=True)
+            rec.log('verdict_level', rr.StateConfiguration(
+                values=list(LEVEL_COLOURS), labels=list(LEVEL_COLOURS),
+                colors=[LEVEL_COLOURS[k] for k in LEVEL_COLOURS]), static=True)
+            for path, name, colour in (('plots/speed/omega', 'ω [rad/s]', (80, 200, 255)),
+                                       ('plots/speed/alpha', 'α [rad/s²]', (255, 200, 60)),
+                                       ('plots/drive_torque', 'drive torque [N m]',
+                                        (200, 120, 255)),
+                                       ('plots/unbalance/limit', 'limit (1.0)',
+                                        LEVEL_COLOURS[assessment.ERROR])):
+                rec.log(path, rr.SeriesLines(names=[name], colors=[colour], widths=[2.0]),
+                        static=True)
+        for key in planes:
+            label = 'static' if key == 'static' else f'plane {key[6:]}'
+            rec.log(f'plots/unbalance/{key}', rr.SeriesLines(
+                names=[f'{label} [U / permissible]'], colors=[PLANE_COLOURS[key]],
+                widths=[2.0]), static=True)
+            rec.log(f'polar/{key}/grid', _polar_grid(), static=True)
+            rec.log(f'polar/{key}/grid_labels', _polar_grid_labels(), static=True)
+        for name in supports:
+            colour = SUPPORT_COLOURS[self._supports.index(name) % len(SUPPORT_COLOURS)]
+            for part in ('rotating', 'static'):
+                rec.log(f'plots/load_{part}/{name}', rr.SeriesLines(
+                    names=[f'{name} [N]'], colors=[colour], widths=[2.0]), static=True)
+
+    def _draw_rotor(self, model, changes):
+        layout, rec = model.layout, self.rec
+        rec.log('world/stator/rotor/components', rr.Clear(recursive=True))
         smallest = view_resolution(layout)
-        for component, share in zip(layout.components, shares):
-            rec.log(f'world/rotor/components/{component.name}',
-                    _shape(component, _colour(share / top), smallest))
-        speed = self.service_speed or layout.balancing.service_speed or 1.0
-        assessment = assess_balance(model, speed)
-        self._planes = assessment.planes
-        for label, plane, allowed in zip(PLANES, assessment.planes,
-                                         assessment.plane_permissible):
-            radius = plane.correction_radius
-            rec.log(f'world/rotor/correction/{label}', rr.LineStrips3D(
-                [_circle(radius, plane.z)], colors=[(120, 200, 120)]))
-            rec.log(f'world/rotor/correction/{label}/mass', rr.Points3D(
-                [[radius * math.cos(plane.correction_angle),
-                  radius * math.sin(plane.correction_angle), plane.z]],
-                radii=0.02 + 0.2 * min(plane.correction_mass, 1.0), colors=[(40, 160, 40)],
-                labels=[f'{plane.correction_mass * 1e3:.0f} g']))
-            rec.log(f'polar/{label}/unbalance', rr.Arrows2D(
-                origins=[[0.0, 0.0]], vectors=[[v * 1e6 for v in plane.vector]],
-                labels=[f'{label}: {plane.amount * 1e6:.0f} g mm at '
-                        f'{math.degrees(plane.angle):.1f} deg']))
-            rec.log(f'polar/{label}/tolerance', rr.LineStrips2D(
-                [[(allowed * 1e6 * math.cos(a), allowed * 1e6 * math.sin(a))
-                  for a in np.linspace(0.0, 2 * math.pi, 65)]], colors=[(200, 60, 60)]))
-        verdict = 'WITHIN' if assessment.within_grade else 'OUT OF'
-        rec.log('verdict', rr.TextDocument(
-            f'# {layout.name}\n\ndigest `{layout.digest()}`\n\nachieved G '
-            f'{assessment.equivalent_grade:.3g} at {speed:.4g} rad/s: **{verdict} G '
-            f'{assessment.grade:g}**\n\n' + '\n'.join(
-                f'- {label}: {p.amount * 1e6:.0f} g mm at {math.degrees(p.angle):.1f} deg; '
-                f'correct with {p.correction_mass * 1e3:.0f} g at '
-                f'{math.degrees(p.correction_angle):.1f} deg'
-                for label, p in zip(PLANES, assessment.planes)), media_type='text/markdown'))
-        rec.log('events', rr.TextLog(f"layout '{layout.name}' ({layout.digest()}) in force",
-                                     level='INFO'))
+        labelled = _labelled(layout, changes, [(0.0, 0.0, s.z) for s in layout.supports]
+                             + _correction_places(self._full))
+        for component in layout.components:
+            changed = component.name in changes
+            label = None
+            if component.name in labelled:
+                label = component.name + (f' ({changes[component.name]})' if changed else '')
+            rec.log(f'world/stator/rotor/components/{component.name}',
+                    _shape(component, CHANGED_COLOUR if changed else COMPONENT_COLOUR,
+                           smallest, label))
+        rec.log('world/stator/rotor/correction', rr.Clear(recursive=True))
+
+    # -- the verdict ------------------------------------------------------------------
+
+    def _judge(self, top_speed, quiet=False):
+        """
+        Judge the layout in force at the top speed seen; log the verdict.
+
+        ``quiet``: only the text and drawings follow (the top speed grew, the level
+        did not change).
+        """
+        verdict = judge_balance(self._full, top_speed, self._grade(), self.warn_fraction)
+        old, self._verdict = self._verdict, verdict
+        rec = self.rec
+        if not quiet:
+            rec.log('verdict_level', rr.StateChange(state=verdict.level))
+        rec.log('verdict', rr.TextDocument(self._verdict_text(verdict),
+                                           media_type='text/markdown'))
+        if not quiet and (old is None or old.level != verdict.level or top_speed == 0.0):
+            a = verdict.assessment
+            said = verdict.words if a is None else \
+                f'G {a.equivalent_grade:.3g} at {a.omega:.4g} rad/s: {verdict.words}'
+            self._event(said, LOG_LEVELS[verdict.level], LEVEL_COLOURS[verdict.level])
+        self._draw_balance(verdict)
+
+    def _event(self, text, level, colour=None):
+        """Log an events line, its time first (the time column would take the width)."""
+        clock = datetime.datetime.fromtimestamp(self._time_ns * 1e-9, datetime.timezone.utc)
+        self.rec.log('events', rr.TextLog(f"{clock.strftime('%H:%M:%S.%f')[:11]}  {text}",
+                                          level=level, color=colour))
+
+    def _verdict_text(self, verdict):
+        layout = self._model.layout
+        a = verdict.assessment
+        lines = [f'## {verdict.level}: {verdict.words}', '',
+                 f"layout **{layout.name}** (`{layout.digest()}`)", '']
+        if a is None:
+            lines.append(verdict.text)
+        else:
+            lines += [f'achieved **G {a.equivalent_grade:.3g}** at the {verdict.speed_source} '
+                      f'{a.omega:.4g} rad/s; U_per {g_mm(a.permissible):,.0f} g mm', '',
+                      f'correction masses at r {layout.correction_radius():.3g} m:'
+                      if a.planes else 'no correction planes: the static unbalance is judged',
+                      '',
+                      '| plane | U [g mm] | angle | / limit | add |',
+                      '|---|---:|---:|---:|---|']
+            for key, p, allowed, fraction in zip(PLANES, a.planes, a.plane_permissible,
+                                                 a.fractions):
+                lines.append(f'| {key[6:]} | {g_mm(p.amount):,.0f} | '
+                             f'{degrees(p.angle):.1f}° | {fraction:.2f} | '
+                             f'{_added(p)[4:]} at {degrees(p.correction_angle):.1f}° |')
+            if not a.planes:
+                lines.append(f'| static | {g_mm(a.static_amount):,.0f} | '
+                             f'{degrees(a.static_angle):.1f}° | {a.fractions[0]:.2f} | |')
+        if self._changes:
+            lines += ['', 'changed: ' + '; '.join(f'**{name}** {change}'
+                                                  for name, change in self._changes.items())]
+        if self._warnings:
+            lines += ['', '**implausible?**'] + [f'- {w}' for w in self._warnings]
+        return '\n'.join(lines)
+
+    def _draw_balance(self, verdict):
+        """Correction masses in 3D and the polar diagrams, for the verdict's assessment."""
+        a = verdict.assessment
+        rec = self.rec
+        if a is None:
+            return
+        places = _correction_places(self._full)
+        texts = [f'{key[6:]}: {_added(p)}' for key, p in zip(PLANES, a.planes)]
+        if len(places) == 2 and math.dist(*places) <= LABEL_SPACING:
+            texts = [' '.join(texts), None]     # one label for both: they would overlap
+        for key, plane, allowed, fraction, place, text in zip(
+                PLANES, a.planes, a.plane_permissible, a.fractions, places, texts):
+            rec.log(f'world/stator/rotor/correction/{key}', rr.LineStrips3D(
+                [_circle(plane.correction_radius, plane.z)], colors=[CORRECTION_COLOUR]))
+            rec.log(f'world/stator/rotor/correction/{key}/mass', rr.Points3D(
+                [place], radii=0.015 + 0.1 * min(plane.correction_mass or 0.0, 1.0),
+                colors=[CORRECTION_COLOUR], labels=[text] if text else None))
+            self._draw_polar(key, fraction, plane.angle, g_mm(plane.amount), g_mm(allowed),
+                             f'{_added(plane)} at '
+                             f'{degrees(plane.correction_angle):.0f}°, r '
+                             f'{plane.correction_radius:.2f} m')
+        if not a.planes:
+            self._draw_polar('static', a.fractions[0], a.static_angle, g_mm(a.static_amount),
+                             g_mm(a.permissible), None)
+
+    def _draw_polar(self, key, fraction, angle, amount, allowed, correction):
+        rec = self.rec
+        colour = PLANE_COLOURS[key]
+        reach = min(fraction, POLAR_REACH)
+        c, s = math.cos(angle), math.sin(angle)
+
+        def at(radius, theta):     # rotor-frame polar point drawn with Y up
+            return [radius * math.cos(theta), -radius * math.sin(theta)]
+
+        rec.log(f'polar/{key}/limit', rr.LineStrips2D(
+            [_ring(1.0)], colors=[LEVEL_COLOURS[assessment.ERROR]], radii=0.012))
+        vectors = [[reach * c, -reach * s]]
+        colours = [colour]
+        if correction is not None:
+            vectors.append([-reach * c, reach * s])
+            colours.append(CORRECTION_COLOUR)
+        rec.log(f'polar/{key}/vectors', rr.Arrows2D(origins=[[0.0, 0.0]] * len(vectors),
+                                                    vectors=vectors, colors=colours,
+                                                    radii=0.025))
+        # Labels apart: the vectors' values above and below the grid (in their colours),
+        # each ring's label a quarter turn away from both vectors.
+        positions = [[0.0, -POLAR_TEXT_ROW - 0.15]]    # labels hang below their point
+        texts = [f'U {amount:,.0f} g mm at {degrees(angle):.0f}° = {fraction:.2f}']
+        if correction is not None:
+            positions.append([0.0, POLAR_TEXT_ROW])
+            texts.append(correction)
+        # The rings' labels on the diagonal most across the vectors' line, clear of
+        # the angle labels at 0, 90, 180 and 270 deg.
+        across = max((math.pi / 4 + k * math.pi / 2 for k in range(4)),
+                     key=lambda d: abs(math.sin(d - angle)) - 1e-9 * d)
+        positions += [at(1.0, across), at(0.5, across + math.pi)]
+        texts += [f'limit {allowed:,.0f} g mm', '0.5']
+        rec.log(f'polar/{key}/labels', rr.Points2D(
+            positions, radii=0.0, labels=texts, show_labels=True,
+            colors=colours + [LEVEL_COLOURS[assessment.ERROR], (160, 160, 170)]))
+
+    # -- samples ----------------------------------------------------------------------
 
     def sample(self, stamp_ns, angle, omega, alpha, result):
         """Log one sample of the live node (SampleLoads), every ``every``-th one only."""
         self._count += 1
-        if self._count % self.every:
+        if self._count % self.every and self._pending is None:
             return
         one = SimpleNamespace(
             support_force={name: np.array([force]) for name, (force, _) in
@@ -142,46 +428,160 @@ class RunLogger:
     def samples(self, stamp_ns, angle, omega, alpha, result, every=None):
         """Log a block of samples, given as arrays, and the engine's result for them."""
         every = every or self.every
+        stamp_ns = np.asarray(stamp_ns)
+        if self._pending is not None and len(stamp_ns):
+            self.layout(int(stamp_ns[0]), self._pending)
         model, rec = self._model, self.rec
-        times = rr.TimeColumn(TIMELINE, timestamp=np.asarray(stamp_ns) * 1e-9)
+        times = rr.TimeColumn(TIMELINE, timestamp=stamp_ns * 1e-9)
+        n = len(omega)
         scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,
-                   'plots/drive_torque': result.drive_torque}
-        for name, force in result.support_force.items():
-            for i, axis in enumerate('xyz'):
-                scalars[f'plots/supports/{name}/{axis}'] = force[:, i]
-            scalars[f'plots/supports/{name}/magnitude'] = np.linalg.norm(force, axis=1)
-        speed = np.abs(omega)
-        service = self.service_speed or model.layout.balancing.service_speed or 0.0
-        # The limit grows as 1 / omega: drawn from a fifth of the service speed on.
-        shown = speed > max(0.2 * service, 1.0)
-        for label, plane in zip(PLANES, self._planes):
-            scalars[f'plots/unbalance/{label}'] = np.full(len(omega), plane.amount * 1e6)
-            with np.errstate(divide='ignore'):
-                limit = permissible_unbalance(model.layout.balancing.grade, model.mass,
-                                              speed) * 1e6
-            scalars[f'plots/unbalance/{label}_limit'] = np.where(shown, limit, np.nan)
+                   'plots/drive_torque': result.drive_torque,
+                   'plots/unbalance/limit': np.ones(n)}
+        parts = support_load_parts(model, angle, omega, alpha)
+        for name in parts.static:
+            scalars[f'plots/load_rotating/{name}'] = parts.rotating[name]
+            scalars[f'plots/load_static/{name}'] = parts.static[name]
+        top = np.maximum.accumulate(np.maximum(np.abs(omega), self._top_speed))
+        fractions = self._fractions(top, n)
+        for key, values in zip(self._planes, fractions):
+            scalars[f'plots/unbalance/{key}'] = values
         for path, values in scalars.items():
             rr.send_columns(path, indexes=[times],
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
                             recording=rec)
-        rr.send_columns('world/rotor', indexes=[times], columns=rr.Transform3D.columns(
-            rotation_axis_angle=[rr.RotationAxisAngle(axis=[0, 0, 1], radians=float(q))
-                                 for q in angle]), recording=rec)
-        # Arrows: a subset of the samples (a viewer need not draw them all).
+        half = 0.5 * np.asarray(angle, float)
+        quaternions = np.zeros((n, 4))
+        quaternions[:, 2], quaternions[:, 3] = np.sin(half), np.cos(half)
+        rr.send_columns('world/stator/rotor', indexes=[times],
+                        columns=rr.Transform3D.columns(quaternion=quaternions), recording=rec)
+        if n and model.layout.balancing.service_speed is None:
+            self._follow_top_speed(stamp_ns, top)
+        self._arrows(stamp_ns, omega, result, every)
+
+    def _fractions(self, top, n):
+        """Per judged plane, (n,) fractions of its limit; NaN while not judged."""
+        verdict = self._verdict
+        if self._model.layout.balancing.service_speed is not None:
+            return [np.full(n, f) for f in verdict.assessment.fractions]
+        with np.errstate(invalid='ignore'):
+            return [np.where(top > 0.0, f * top, np.nan) for f in self._unit_fractions]
+
+    def _follow_top_speed(self, stamp_ns, top):
+        """
+        Without a service speed the verdict is judged at the top speed seen: follow it.
+
+        The level can only rise with the top speed (U_per falls as 1 / omega); it is
+        re-judged at each sample where the worst plane's fraction crosses a level.
+        """
+        worst = max(self._unit_fractions) * top
+        code = np.where(top <= 0.0, 0, np.where(worst <= self.warn_fraction, 1,
+                                                np.where(worst <= 1.0, 2, 3)))
+        steps = np.nonzero(np.diff(np.concatenate([[self._level_code], code])))[0]
+        for k in steps.tolist():
+            self._time_ns = int(stamp_ns[k])
+            self.rec.set_time(TIMELINE, timestamp=self._time_ns * 1e-9)
+            self._judge(float(top[k]))
+        self._level_code = int(code[-1])
+        self._top_speed = float(top[-1])
+        # The verdict text and the polar arrows follow the top speed in 3 % steps.
+        while True:
+            k = int(np.searchsorted(top, max(1.03 * self._drawn_top, 1e-300), side='left'))
+            if k >= len(top):
+                break
+            self._drawn_top = float(top[k])
+            self._time_ns = int(stamp_ns[k])
+            self.rec.set_time(TIMELINE, timestamp=self._time_ns * 1e-9)
+            self._judge(self._drawn_top, quiet=True)
+
+    def _arrows(self, stamp_ns, omega, result, every):
+        """Load and unbalance arrows for a subset of the samples (a viewer need not draw all)."""
+        model, rec = self._model, self.rec
         static = static_unbalance(model)
+        com = [0.0, 0.0, model.s_z / model.mass]
+        origins = [[0.0, 0.0, s.z] for s in model.supports]
         for k in range(0, len(omega), every):
-            rec.set_time(TIMELINE, timestamp=stamp_ns[k] * 1e-9)
-            origins = [[0.0, 0.0, s.z] for s in model.supports]
-            vectors = [list(result.support_force[s.name][k] / NEWTONS_PER_METRE)
-                       for s in model.supports]
-            rec.log('world/stator/loads',
-                    rr.Arrows3D(origins=origins, vectors=vectors, colors=[(220, 120, 0)]))
+            rec.set_time(TIMELINE, timestamp=int(stamp_ns[k]) * 1e-9)
+            forces = [result.support_force[s.name][k] for s in model.supports]
+            rec.log('world/stator/loads', rr.Arrows3D(
+                origins=origins, vectors=[_arrow(f, NEWTONS_PER_METRE) for f in forces],
+                colors=[LOAD_COLOUR], radii=0.012))
             # The static unbalance's centrifugal force, U omega^2, turns with the rotor.
             force, _ = unbalance_wrench(static, (0.0, 0.0), float(omega[k]))
-            rec.log('world/rotor/unbalance_force', rr.Arrows3D(
-                origins=[[0.0, 0.0, model.s_z / model.mass]],
-                vectors=[[f / UNBALANCE_NEWTONS_PER_METRE for f in force]],
-                colors=[(230, 30, 30)]))
+            size = math.hypot(force[0], force[1])
+            rec.log('world/stator/rotor/unbalance_force', rr.Arrows3D(
+                origins=[com], vectors=[_arrow(force, UNBALANCE_NEWTONS_PER_METRE)],
+                colors=[UNBALANCE_COLOUR], radii=0.012,
+                labels=[f'U ω² {size:.0f} N'] if size > 1.0 else None))
+
+
+def _arrow(force, newtons_per_metre):
+    """Return the arrow (m) of a force (N), at most LONGEST_ARROW long."""
+    vector = np.asarray(force, float) / newtons_per_metre
+    length = float(np.linalg.norm(vector))
+    if length > LONGEST_ARROW:
+        vector = vector * (LONGEST_ARROW / length)
+    return vector.tolist()
+
+
+def describe_changes(previous, layout):
+    """
+    {component name: what changed} between two layouts, for people.
+
+    New components say 'added'; removed ones are listed under their name as
+    'removed'. Empty when ``previous`` is None.
+    """
+    if previous is None:
+        return {}
+    before = {c.name: c for c in previous.components}
+    changes = {}
+    for c in layout.components:
+        old = before.pop(c.name, None)
+        if old is None:
+            changes[c.name] = 'added'
+            continue
+        said = []
+        for field, unit, scale in (('mass', 'kg', 1.0), ('radius', 'm', 1.0),
+                                   ('angle', 'deg', 180.0 / math.pi), ('z', 'm', 1.0)):
+            a, b = getattr(old, field), getattr(c, field)
+            if a != b:
+                said.append(f'{field} {a * scale:.6g} → {b * scale:.6g} {unit}')
+        if old.shape != c.shape or old.inertia != c.inertia:
+            said.append('shape or inertia')
+        if said:
+            changes[c.name] = ', '.join(said)
+    for name in before:
+        changes[name] = 'removed'
+    return changes
+
+
+def _labelled(layout, changes, reserved=()):
+    """
+    Names of the components whose 3D label fits: changed ones first, then by m R.
+
+    A label is left out when its centre of mass is within LABEL_SPACING of one
+    already labelled or of a ``reserved`` point (m, rotor frame: where the load
+    arrows start and the correction masses sit).
+    """
+    taken = list(reserved)
+    order = sorted(layout.components, key=lambda c: (c.name not in changes, -c.mass * c.radius))
+    names = set()
+    for c in order:
+        here = (c.radius * math.cos(c.angle), c.radius * math.sin(c.angle), c.z)
+        if all(math.dist(here, other) > LABEL_SPACING for other in taken):
+            names.add(c.name)
+            taken.append(here)
+    return names
+
+
+def _correction_places(model):
+    """Where the correction masses go, (x, y, z) m in the rotor frame (none without planes)."""
+    layout = model.layout
+    planes = layout.correction_planes()
+    if planes is None:
+        return []
+    return [(p.correction_radius * math.cos(p.correction_angle),
+             p.correction_radius * math.sin(p.correction_angle), p.z)
+            for p in plane_unbalances(model, *planes, layout.correction_radius())]
 
 
 def _circle(radius, z, points=97, centre=(0.0, 0.0, 0.0)):
@@ -190,9 +590,37 @@ def _circle(radius, z, points=97, centre=(0.0, 0.0, 0.0)):
                      np.full(points, z)], axis=1)
 
 
-def _colour(share):
-    share = min(max(share, 0.0), 1.0)
-    return (int(60 + 195 * share), 80, int(255 - 195 * share))
+def _ring(radius, points=97):
+    angles = np.linspace(0.0, 2 * math.pi, points)
+    return np.stack([radius * np.cos(angles), radius * np.sin(angles)], axis=1)
+
+
+def _polar_grid():
+    """Rings at 0.5 and 1.4, spokes every 30 deg; the 0 deg spoke (rotor X) brighter."""
+    strips = [_ring(0.5), _ring(1.4)]
+    colours = [GRID_COLOUR, GRID_COLOUR]
+    for k in range(12):
+        theta = k * math.pi / 6
+        strips.append([[0.0, 0.0], [1.4 * math.cos(theta), -1.4 * math.sin(theta)]])
+        colours.append((220, 220, 220) if k == 0 else GRID_COLOUR)
+    return rr.LineStrips2D(strips, colors=colours, radii=[0.006] * 2 + [0.012] + [0.004] * 11)
+
+
+def _polar_grid_labels():
+    """Angle labels outside the grid, counter-clockwise; 0 deg names rotor X."""
+    angles = (0, 90, 180, 270)
+    positions = [[1.6 * math.cos(math.radians(a)), -1.6 * math.sin(math.radians(a))]
+                 for a in angles]
+    labels = ['0°', '90°', '180°', '270°']
+    return rr.Points2D(positions, radii=0.0, labels=labels, show_labels=True,
+                       colors=[(220, 220, 220)] + [(160, 160, 170)] * 3)
+
+
+def _added(plane):
+    """Say what a plane's correction is: 'add 129 g', or that there is no radius for one."""
+    if plane.correction_mass is None:
+        return 'add nothing: no correction radius'
+    return f'add {plane.correction_mass * 1e3:.0f} g'
 
 
 def view_resolution(layout):
@@ -208,33 +636,34 @@ def view_resolution(layout):
     return 2.0 * (2.0 * reach) / VIEW_PIXELS
 
 
-def _shape(component, colour, smallest=0.0):
+def _shape(component, colour, smallest=0.0, label=None):
     """Return a component's shape in the rotor frame at (R, theta, z), for rerun."""
     c, s = math.cos(component.angle), math.sin(component.angle)
     centre = [component.radius * c, component.radius * s, component.z]
     turn = rr.RotationAxisAngle(axis=[0, 0, 1], radians=component.angle)
     shape = component.shape
-    label = [component.name]
+    labels = [label] if label else None
     if shape is None or shape.type == 'point' or shape.extent < smallest:
-        return rr.Points3D([centre], radii=0.02, colors=[colour], labels=label)
+        return rr.Points3D([centre], radii=0.02, colors=[colour], labels=labels)
     if shape.type == 'box':
         return rr.Boxes3D(centers=[centre], half_sizes=[[v / 2 for v in shape.size]],
-                          rotation_axis_angles=[turn], colors=[colour], labels=label,
+                          rotation_axis_angles=[turn], colors=[colour], labels=labels,
                           fill_mode='solid')
     if shape.type == 'sphere':
         return rr.Ellipsoids3D(centers=[centre], half_sizes=[[shape.radius] * 3],
-                               colors=[colour], labels=label, fill_mode='solid')
+                               colors=[colour], labels=labels, fill_mode='solid')
     if shape.type == 'tube' and shape.axis == 'axial':
         # A hollow drum drawn solid would hide everything inside it: its four rims.
         rims = [_circle(r, component.z + end * shape.length / 2, centre=centre)
                 for r in (shape.inner_radius, shape.outer_radius) for end in (-1, 1)]
-        return rr.LineStrips3D(rims, colors=[colour], labels=label * 4)
+        return rr.LineStrips3D(rims, colors=[colour], labels=[label] + [''] * 3 if label
+                               else None)
     radius = shape.outer_radius if shape.type == 'tube' else shape.radius
     # rerun's cylinders lie along Z; radial and tangential axes are turned onto x, y.
     axis = {'axial': None, 'radial': [-s, c, 0.0], 'tangential': [c, s, 0.0]}[shape.axis]
     rotation = [rr.RotationAxisAngle(axis=axis, radians=math.pi / 2)] if axis else None
     return rr.Cylinders3D(centers=[centre], lengths=[shape.length], radii=[radius],
-                          rotation_axis_angles=rotation, colors=[colour], labels=label,
+                          rotation_axis_angles=rotation, colors=[colour], labels=labels,
                           fill_mode='solid')
 
 

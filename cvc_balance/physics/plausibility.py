@@ -1,0 +1,136 @@
+"""
+Plausibility of a valid layout: warnings (never errors) for likely unit mistakes.
+
+:mod:`cvc_balance.physics.layout` rejects what cannot be used; a layout can be valid
+and still say something its author did not mean: ``angle: 90`` (degrees typed into
+the radians field), ``radius: 620`` (millimetres for metres), ``mass: 60000`` (grams
+for kilograms). :func:`layout_warnings` names each such field in one line, in the
+layout contract's words, and leaves the layout as it is: the commands print the
+warnings, the node logs them and puts them in its diagnostics, the rerun view shows
+them with the layout.
+"""
+
+import math
+
+from cvc_balance.physics.frames import STANDARD_GRAVITY
+
+LONGEST = 100.0
+"""m: no rotor this package is for has a radius, length or axial position this long."""
+
+MASS_RATIO = 1000.0
+"""A point mass heavier than this many times the median of the others is suspect."""
+
+DENSITY_RANGE = (5.0, 30000.0)
+"""kg/m^3 a component's mass over its shape's volume may have: foam to beyond osmium
+(22 590 kg/m^3, the densest element). Shapes stand for hollow housings too, so the low
+end is generous."""
+
+MASS_PEERS = 3
+"""Fewest other components for a median to compare a mass with."""
+
+GRAVITY_RANGE = (9.0, 10.5)
+"""m/s^2: Earth's gravity is 9.78-9.83; 0 (no gravity) is allowed too."""
+
+
+def layout_warnings(layout):
+    """
+    Return the plausibility warnings of a validated Layout, one line each (a tuple).
+
+    Empty when nothing looks mistaken. Checks: angles beyond a full turn, lengths
+    of :data:`LONGEST` m or more, a shaped component's density outside
+    :data:`DENSITY_RANGE`, a point mass far above the others', gravity that is
+    neither 0 nor Earth's.
+    """
+    warnings = []
+    for c in layout.components:
+        where = f"component '{c.name}'"
+        if abs(c.angle) > 2.0 * math.pi:
+            warnings.append(
+                f'{where}: angle {c.angle:.6g} rad ({math.degrees(c.angle):.6g} deg) is more '
+                'than a full turn: degrees in the radians field? (angle_deg takes degrees)')
+        for field, value in _lengths(c):
+            if abs(value) >= LONGEST:
+                warnings.append(f'{where}: field {field} {value:g} m is {LONGEST:g} m or more: '
+                                'millimetres for metres? (lengths are in m)')
+        warnings += _density(c, where)
+    warnings += _mass_outliers([c for c in layout.components if _volume(c.shape) is None])
+    for s in layout.supports:
+        if abs(s.z) >= LONGEST:
+            warnings.append(f"support '{s.name}': field z {s.z:g} m is {LONGEST:g} m or more: "
+                            'millimetres for metres? (lengths are in m)')
+    balancing = layout.balancing
+    for field, value in ([('balancing.planes', z) for z in balancing.planes or ()]
+                         + [('balancing.correction_radius', balancing.correction_radius)]):
+        if value is not None and abs(value) >= LONGEST:
+            warnings.append(f'layout: field {field} {value:g} m is {LONGEST:g} m or more: '
+                            'millimetres for metres? (lengths are in m)')
+    g = math.sqrt(sum(v * v for v in layout.gravity))
+    low, high = GRAVITY_RANGE
+    if g != 0.0 and not low <= g <= high:
+        warnings.append(f'layout: field gravity has magnitude {g:.6g} m/s^2, neither 0 nor '
+                        f"Earth's ({STANDARD_GRAVITY} m/s^2): other units?")
+    return tuple(warnings)
+
+
+def _lengths(component):
+    """(field, value m) of a component's lengths: placement and shape."""
+    yield 'radius', component.radius
+    yield 'z', component.z
+    shape = component.shape
+    if shape is None:
+        return
+    for key in ('radius', 'length', 'inner_radius', 'outer_radius'):
+        value = getattr(shape, key)
+        if value:
+            yield f'shape.{key}', value
+    for i, value in enumerate(shape.size):
+        yield f'shape.size[{i}]', value
+
+
+def _density(component, where):
+    """Warn (a list of one) when a shaped component's density is no material's."""
+    volume = _volume(component.shape)
+    if not volume:
+        return []
+    density = component.mass / volume
+    low, high = DENSITY_RANGE
+    if density > high:
+        why = 'denser than any material: grams for kilograms? (masses are in kg)'
+    elif density < low:
+        why = 'lighter than foam: a mass or a shape in other units?'
+    else:
+        return []
+    return [f'{where}: mass {component.mass:g} kg in its shape ({volume:.4g} m^3) is '
+            f'{density:.4g} kg/m^3, {why}']
+
+
+def _volume(shape):
+    """Volume (m^3) of a shape; None for a point mass or no shape."""
+    if shape is None or shape.type == 'point':
+        return None
+    if shape.type == 'cylinder':
+        return math.pi * shape.radius ** 2 * shape.length
+    if shape.type == 'tube':
+        return math.pi * (shape.outer_radius ** 2 - shape.inner_radius ** 2) * shape.length
+    if shape.type == 'box':
+        return shape.size[0] * shape.size[1] * shape.size[2]
+    return 4.0 / 3.0 * math.pi * shape.radius ** 3
+
+
+def _mass_outliers(components):
+    """Warnings for point masses above MASS_RATIO times the median of the others'."""
+    if len(components) <= MASS_PEERS:
+        return []
+    masses = sorted(c.mass for c in components)
+    warnings = []
+    for c in components:
+        others = list(masses)
+        others.remove(c.mass)
+        middle = len(others) // 2
+        median = others[middle] if len(others) % 2 else \
+            0.5 * (others[middle - 1] + others[middle])
+        if c.mass > MASS_RATIO * median:
+            warnings.append(f"component '{c.name}': mass {c.mass:g} kg is "
+                            f'{c.mass / median:.0f} times the median of the others '
+                            f'({median:g} kg): grams for kilograms? (masses are in kg)')
+    return warnings
