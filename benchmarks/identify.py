@@ -14,7 +14,6 @@ Run: ./dev.sh run python benchmarks/identify.py [--quick]
 """
 
 import argparse
-import copy
 import math
 from pathlib import Path
 import tempfile

@@ -19,10 +19,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'cvc_balance'
 LAYERS = {
     'physics': 0,      # numpy only: layouts, engine, unbalance, ISO 21940, motion
     'identify': 1,     # the unbalance from measured support loads (numpy)
+    'field': 1,        # field balancing: 1x readings, influence coefficients, weight plans
     'messages': 1,     # topic names and types, CDR, ros2msg schemas (no rclpy)
     'bag': 2,          # MCAP reading and writing, replay, scenarios (no rclpy)
     'view': 2,         # rerun
     'study': 2,        # methods side by side, the 40-digit reference, the bench
+    'report': 2,       # the field-balancing report: HTML and PNG figures
     'ros': 3,          # the node, play, record
     'cli': 4,          # the cvc-balance command
 }
@@ -31,10 +33,12 @@ THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
     'physics': {'numpy', 'yaml'},
     'identify': {'numpy'},
+    'field': {'numpy', 'scipy'},
     'messages': {'ament_index_python'},
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal'},
     'view': {'numpy', 'rerun'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
+    'report': {'numpy', 'matplotlib'},
 }
 
 
