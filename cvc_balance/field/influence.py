@@ -98,6 +98,8 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
     readings (None: not known). Planes are named in the order their first trial comes.
     Raises ValueError when the runs cannot give every plane's coefficients.
     """
+    if not trials:
+        raise ValueError('no trial run: give one per correction plane')
     baseline = np.asarray(baseline, complex).reshape(-1)
     readings = np.asarray(readings, complex).reshape(len(trials), -1)
     count = len(baseline)
@@ -107,8 +109,6 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
     sensors = tuple(sensors) if sensors is not None else \
         tuple(f'sensor {k + 1}' for k in range(count))
     planes = tuple(dict.fromkeys(t.plane for t in trials))
-    if not trials:
-        raise ValueError('no trial run: give one per correction plane')
     weights_on = np.zeros((len(trials), len(planes)), complex)
     for k, trial in enumerate(trials):
         if not (trial.mass > 0.0 and trial.radius > 0.0):
