@@ -357,11 +357,11 @@ def measured_after(path, args, result):
                          'correction from')
     grade = result.grade
     value = grade.equivalent_grade(view.before)
-    return {'bag': str(path), 'date': bag_date(run.first_ns),
-            'layout': _layout(run.layout), 'speed': run.window.speed,
-            'equivalent_grade': value, 'within_grade': value <= grade.grade,
-            'planes': [_plane_vector(p, z, u, ci) for p, z, u, ci in
-                       zip(view.planes, view.z, view.before, view.ci95)]}
+    return plain({'bag': str(path), 'date': bag_date(run.first_ns),
+                  'layout': _layout(run.layout), 'speed': run.window.speed,
+                  'equivalent_grade': value, 'within_grade': value <= grade.grade,
+                  'planes': [_plane_vector(p, z, u, ci) for p, z, u, ci in
+                             zip(view.planes, view.z, view.before, view.ci95)]})
 
 
 def _layout(layout):
@@ -435,7 +435,18 @@ def summarise(result, record=None):
                                        f'the plan is within {plan.gap:.2%} of the optimum')
         elif plan.note:
             summary['warnings'].append(plan.note)
-    return summary
+    return plain(summary)
+
+
+def plain(data):
+    """Return ``data`` with numpy scalars as Python numbers (for JSON and YAML)."""
+    if isinstance(data, dict):
+        return {key: plain(value) for key, value in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [plain(value) for value in data]
+    if hasattr(data, 'item') and not isinstance(data, (str, bytes)):
+        return data.item()
+    return data
 
 
 def _plan(plan, problem, result, grade):

@@ -22,7 +22,8 @@ td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: right; }
 th { background: #eee; } td.text, th.text { text-align: left; }
 .bolt td { font-size: 1.1em; } .warning { background: #fff3e0; border-left: 4px solid #ef6c00;
 padding: 0.4em 0.8em; margin: 0.3em 0; }
-figure { display: inline-block; margin: 0.5em; } .small { color: #666; font-size: 0.85em; }
+figure { display: inline-block; margin: 0.5em 1%; width: 47%; vertical-align: top; }
+figure img { width: 100%; } .small { color: #666; font-size: 0.85em; }
 '''
 
 
@@ -85,9 +86,16 @@ def page(summary, figures, generated=None):
                 for w in plan['weights']]
         parts.append(_table(('plane', 'site angle [deg]', 'radius [m]', 'weights',
                              'total [g]'), rows, 1, 'bolt'))
-        parts.append(f'<p>{plan["count"]} weights ({escape(plan["name"])} plan, '
-                     f'{escape(plan["status"])}). Angles in the rotor frame, from rotor X '
-                     'toward rotor Y.</p>')
+        if plan['name'] == 'split':
+            how = 'the vector split of the continuous correction, rounded to the kit'
+        elif summary['objective'] == 'fewest':
+            how = 'the fewest weights within the limits (mixed-integer plan, HiGHS: ' \
+                f'{plan["status"]})'
+        else:
+            how = f'the smallest residual with at most {summary["max_weights"]} weights ' \
+                f'(mixed-integer plan, HiGHS: {plan["status"]})'
+        parts.append(f'<p>{plan["count"]} weights: {escape(how)}. Angles in the rotor frame, '
+                     'from rotor X toward rotor Y; radius of the weights\' centres.</p>')
     else:
         rows = [(c['plane'], f"{c['angle_deg']:.1f}",
                  f"{c['radius']:.3f}" if c['radius'] else '-',
@@ -125,12 +133,18 @@ def page(summary, figures, generated=None):
         parts.append('<h2>Unbalance before (identified from the load cells)</h2>'
                      + _table(('plane', 'z [m]', 'U [g mm]', 'angle [deg]', '95 % [g mm]',
                                'allowed [g mm]'), rows))
-    parts.append('<h2>Run</h2>' + _table(('', ''), [
-        ('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
-        ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
-        ('steady speed', f"{run['speed']:.5g} rad/s (spread {run['speed_spread']:.2%})"),
-        ('read over', f"{run['revolutions']} whole revolutions, {run['window'][0]:.3f}-"
-                      f"{run['window'][1]:.3f} s")], 2))
+    rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
+            ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+            ('steady speed', f"{run['speed']:.5g} rad/s (spread {run['speed_spread']:.2%})"),
+            ('read over', f"{run['revolutions']} whole revolutions, {run['window'][0]:.3f}-"
+                          f"{run['window'][1]:.3f} s")]
+    measured = summary.get('measured_after')
+    if measured is not None:
+        rows.append(('check run after', f"{measured['bag']} ({measured['date']}): G "
+                     f"{measured['equivalent_grade']:.2f}, " + ', '.join(
+                         f"plane {q['plane']} {q['g_mm']:.0f} g mm" for q in
+                         measured['planes'])))
+    parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
                           f"{r['phase_deg']:.1f}", f"{r['sigma']:.2g}")
