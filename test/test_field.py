@@ -383,9 +383,9 @@ def test_plan_smallest_residual_equals_brute_force(kit, seed):
     assert abs(got - value) <= 1e-6 * value, (got, value)      # measured: <= 3e-9
     assert plan.count == count
     # And in Euclidean terms within the polygon's 1 / cos(pi / 32) of the best.
+    pairs = itertools.product(plane_options(sites['I']), plane_options(sites['II']))
     euclid = min(float(np.sum(problem.weights * np.abs(problem.residual(np.array(
-        [a[0], b[0]]))))) for a, b in itertools.product(plane_options(sites['I']),
-                                                         plane_options(sites['II'])))
+        [a[0], b[0]]))))) for a, b in pairs)
     assert plan.residual.total <= euclid / math.cos(math.pi / K) * (1 + 1e-9)
 
 
@@ -445,8 +445,8 @@ def test_split_plan_recombines_before_rounding():
     problem = problem_from_unbalance(('I',), [polar(0.1171, 177.6)])
     correction = continuous_correction(problem)
     plan = split_plan(problem, sites, correction)
-    exact = sum(0.68 * m * cmath.exp(1j * a) for a, m in vector_split(correction[0],
-                                                                       sites['I']))
+    shares = vector_split(correction[0], sites['I'])
+    exact = sum(0.68 * m * cmath.exp(1j * a) for a, m in shares)
     assert abs(exact - correction[0]) < 1e-15
     assert all(set(w.masses) <= {0.05, 0.1, 0.2, 0.5} for w in plan.weights)
     assert {round(math.degrees(w.angle)) for w in plan.weights} <= {345, 0}

@@ -190,7 +190,7 @@ def format_record(record):
         cells = []
         for j in range(len(planes)):
             entry = record['coefficients'][s][j]
-            text = f"{entry['amplitude']:.4g} @ {entry['phase_deg']:.1f}"
+            text = f"{entry['amplitude']:.4g} @ {_deg(entry['phase_deg'])}"
             if record['ci95'] is not None:
                 text += f" +-{record['ci95'][s][j]:.2g}"
             cells.append(f'{text:>26}')
@@ -205,6 +205,11 @@ def format_record(record):
 
 def _number(value):
     return 'inf' if value is None else f'{value:.3g}'
+
+
+def _deg(value):
+    """Return an angle in degrees for people, 0.0-359.9 (359.97 reads 0.0)."""
+    return f'{round(value, 1) % 360.0:.1f}'
 
 
 # -- influence (by hand) -----------------------------------------------------------------
@@ -266,14 +271,14 @@ def run_influence(args):
              f"{_number(summary['condition_number'])}:"]
     for s, row in enumerate(summary['coefficients']):
         lines.append(f'  sensor {s + 1}: ' + '   '.join(
-            f"plane {p}: {e['amplitude']:.4g} @ {e['phase_deg']:.1f}"
+            f"plane {p}: {e['amplitude']:.4g} @ {_deg(e['phase_deg'])}"
             for p, e in zip(summary['planes'], row)))
     lines.append('corrections (remove the trial weights; same mass unit as the trials):')
     for c in summary['corrections']:
-        lines.append(f"  plane {c['plane']}: {c['mass']:.4g} @ {c['angle_deg']:.1f} deg")
+        lines.append(f"  plane {c['plane']}: {c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
     for c in summary.get('add_to_trials', ()):
         lines.append(f"  with the trials left on, add in plane {c['plane']}: "
-                     f"{c['mass']:.4g} @ {c['angle_deg']:.1f} deg")
+                     f"{c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
     lines.append('residual readings: ' + ', '.join(
         f"{r['amplitude']:.3g} @ {r['phase_deg']:.0f}" for r in summary['residual']))
     print('\n'.join(lines))
@@ -495,7 +500,7 @@ def format_summary(summary):
         lines.append(f"before: G {before['equivalent_grade']:.3g} "
                      f"({'within' if before['within_grade'] else 'OUT OF'} G {grade['grade']:g}"
                      f" at {grade['speed']:.4g} rad/s); " + ', '.join(
-                         f"plane {p['plane']} {p['g_mm']:.0f} g mm at {p['angle_deg']:.1f} deg "
+                         f"plane {p['plane']} {p['g_mm']:.0f} g mm at {_deg(p['angle_deg'])} deg "
                          f"(allowed {p['permissible_g_mm']:.0f})" for p in before['planes']))
     for plan in summary['plans']:
         mark = ' (recommended)' if plan['name'] == summary['recommended'] else ''
@@ -506,9 +511,9 @@ def format_summary(summary):
                 mass = f"{c['mass'] * 1000:.1f} g at r {c['radius']:.3f} m" \
                     if c['mass'] is not None and summary['unit'] == 'kg m' \
                     else f"{c['unbalance']:.4g} {summary['unit']}"
-                lines.append(f"  plane {c['plane']}: {mass}, {c['angle_deg']:.1f} deg")
+                lines.append(f"  plane {c['plane']}: {mass}, {_deg(c['angle_deg'])} deg")
         for w in plan['weights']:
-            lines.append(f"  plane {w['plane']} site {w['angle_deg']:5.1f} deg: "
+            lines.append(f"  plane {w['plane']} site {_deg(w['angle_deg']):>5} deg: "
                          + ' + '.join(f'{m * 1000:g} g' for m in w['masses']))
         after = plan['after']
         residual = f"residual rms {plan['residual']['rms']:.3g}"

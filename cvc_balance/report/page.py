@@ -27,6 +27,11 @@ figure img { width: 100%; } .small { color: #666; font-size: 0.85em; }
 '''
 
 
+def _deg(value):
+    """Return an angle in degrees for people, 0.0-359.9 (359.97 reads 0.0)."""
+    return f'{round(value, 1) % 360.0:.1f}'
+
+
 def _grade_box(label, value, grade):
     if value is None:
         return f'<div class="unknown">{escape(label)}<b>no grade</b>no load cells</div>'
@@ -81,7 +86,7 @@ def page(summary, figures, generated=None):
                      + _grade_box('grade', None, 0.0) + '</div>')
     parts.append('<h2 id="bolt">What to bolt where</h2>')
     if plan['weights']:
-        rows = [(w['plane'], f"{w['angle_deg']:.1f}", f"{w['radius']:.3f}",
+        rows = [(w['plane'], _deg(w['angle_deg']), f"{w['radius']:.3f}",
                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
                 for w in plan['weights']]
         parts.append(_table(('plane', 'site angle [deg]', 'radius [m]', 'weights',
@@ -97,7 +102,7 @@ def page(summary, figures, generated=None):
         parts.append(f'<p>{plan["count"]} weights: {escape(how)}. Angles in the rotor frame, '
                      'from rotor X toward rotor Y; radius of the weights\' centres.</p>')
     else:
-        rows = [(c['plane'], f"{c['angle_deg']:.1f}",
+        rows = [(c['plane'], _deg(c['angle_deg']),
                  f"{c['radius']:.3f}" if c['radius'] else '-',
                  f"{c['mass'] * 1000:.1f}" if c['mass'] is not None and
                  summary['unit'] == 'kg m' else f"{c['unbalance']:.4g} {summary['unit']}")
@@ -127,7 +132,7 @@ def page(summary, figures, generated=None):
                  'over the channels, each weighted (by its noise, or by its permissible '
                  'unbalance).</p>')
     if grade is not None:
-        rows = [(q['plane'], f"{q['z']:+.3f}", f"{q['g_mm']:.0f}", f"{q['angle_deg']:.1f}",
+        rows = [(q['plane'], f"{q['z']:+.3f}", f"{q['g_mm']:.0f}", _deg(q['angle_deg']),
                  f"{q['ci95_g_mm']:.0f}" if q.get('ci95_g_mm') is not None else '-',
                  f"{q['permissible_g_mm']:.0f}") for q in grade['before']['planes']]
         parts.append('<h2>Unbalance before (identified from the load cells)</h2>'
@@ -147,14 +152,14 @@ def page(summary, figures, generated=None):
     parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
-                          f"{r['phase_deg']:.1f}", f"{r['sigma']:.2g}")
+                          _deg(r['phase_deg']), f"{r['sigma']:.2g}")
                          for r in summary['readings']], 2))
     coefficients = summary['coefficients']
     if coefficients is not None:
         condition = coefficients['condition_number']
         parts.append('<h2>Influence coefficients used</h2>' + _table(
             ['sensor'] + [f'plane {p}' for p in coefficients['planes']],
-            [[s] + [f"{e['amplitude']:.4g} @ {e['phase_deg']:.1f}" for e in row]
+            [[s] + [f"{e['amplitude']:.4g} @ {_deg(e['phase_deg'])}" for e in row]
              for s, row in zip(coefficients['sensors'], coefficients['values'])]))
         parts.append(f'<p>Reading per {escape(summary["unit"])}; condition number '
                      f'{"inf" if condition is None else f"{condition:.3g}"}; from '
