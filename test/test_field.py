@@ -305,7 +305,7 @@ TURNS = np.exp(-2j * np.pi * np.arange(K) / K)
 
 
 def gauge(values, weights):
-    """The plan's measure of a residual: sum of w max_l Re(r e^{-i theta_l})."""
+    """Return the plan's measure of a residual: sum of w max_l Re(r e^{-i theta_l})."""
     return float(np.sum(weights * np.max((values[:, None] * TURNS[None, :]).real, axis=1)))
 
 

@@ -1,6 +1,8 @@
 """
-Field balancing on recorded runs, where the truth is known: simulated gantries, bags from
-our writer and from the mcap library's, the command line and the report in a browser.
+Field balancing on recorded runs, where the truth is known.
+
+Simulated gantries, bags from our writer and from the mcap library's, the command line and
+the report in a browser.
 
 The truth is what the simulator was told (the declared layout plus hidden masses and the
 trial weights), reduced to per-plane unbalance by :mod:`cvc_balance.physics.unbalance`
@@ -61,7 +63,7 @@ def assert_one_line_error(done, *needles):
 
 
 def scenario(tmp_path, name, hidden, seed, noise=15.0, steady=6.0):
-    """Write a field scenario (declared layout: ct_gantry_field) and its bag."""
+    """Write a field scenario's file and its bag; the declared layout is ct_gantry_field."""
     spec = {'name': name, 'layout': str(FIELD_LAYOUT), 'joint_name': 'gantry_joint',
             'rate': 500, 'seed': seed, 'noise': {'angle': 1e-4, 'speed': 0.005},
             'profile': [{'type': 'spin_up', 'to': 23.27, 'alpha': 8.0},
@@ -100,7 +102,7 @@ def correction_components(corrections, tag):
 
 @pytest.fixture(scope='module')
 def runs(tmp_path_factory):
-    """A baseline and two trial runs of a gantry with hidden unbalance (seeded)."""
+    """Simulate a baseline and two trial runs of a gantry with hidden unbalance (seeded)."""
     tmp = tmp_path_factory.mktemp('field')
     trial_i = {'name': 'trial', 'mass': 0.2, 'radius': 0.68, 'angle_deg': 0.0, 'z': -0.15}
     trial_ii = dict(trial_i, z=0.15, angle_deg=90.0)
@@ -444,7 +446,7 @@ def png_size(path):
 
 @pytest.fixture(scope='module')
 def report(bundled_coefficients, tmp_path_factory):
-    """The report of the bundled baseline, with a check run made with the plan's weights."""
+    """Make the report of the bundled baseline, with a check run with the plan's weights."""
     tmp = tmp_path_factory.mktemp('report')
     done = cli('correct', BUNDLED[0], '--coefficients', bundled_coefficients, '--json')
     plan = next(p for p in strict_json(done.stdout)['plans'] if p['name'] == 'optimal')

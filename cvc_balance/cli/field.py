@@ -436,8 +436,11 @@ def summarise(result, record=None):
             summary['warnings'].append('no plan with this kit meets the limits (even the '
                                        'identification\'s 95 % radius spared): ' + plan.note)
         elif plan.status == 'time limit':
-            summary['warnings'].append(f'the mixed-integer search stopped at its time limit: '
-                                       f'the plan is within {plan.gap:.2%} of the optimum')
+            summary['warnings'].append(
+                'the mixed-integer search stopped at its time limit: the plan is the best '
+                f'found, and HiGHS\'s bound leaves a gap of {plan.gap:.0%} (for the smallest '
+                'residual the bound is the continuous optimum: weak; --time-limit for more, '
+                'or --objective fewest with --limit)')
         elif plan.note:
             summary['warnings'].append(plan.note)
     return plain(summary)

@@ -79,6 +79,13 @@ def plane_figure(summary, plane_index, path):
         reach.append(abs(value))
         unit = 'g mm' if summary['unit'] == 'kg m' else f'1e-6 {summary["unit"]}'
         _arrow(axes, 0j, value, AFTER, f'correction {abs(value):,.0f} {unit}', 2.4, drawn)
+        tip = 0j
+        for w in weights:      # the plan's weights head to tail: their sum against it
+            step = w['mass'] * w['radius'] * 1e6 * complex(math.cos(math.radians(
+                w['angle_deg'])), math.sin(math.radians(w['angle_deg'])))
+            _arrow(axes, tip, tip + step, WEIGHT, None, 1.2, drawn)
+            tip += step
+            reach.append(abs(tip))
         title = f'plane {name}: the correction ({unit})'
     ring = 1.18 * max(reach + [1e-9])
     sites = plane['sites']
