@@ -19,11 +19,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'cvc_balance'
 LAYERS = {
     'physics': 0,      # numpy only: layouts, engine, unbalance, ISO 21940, motion
     'identify': 1,     # the unbalance from measured support loads (numpy)
+    'field': 1,        # field balancing: 1x readings, influence coefficients, weight plans
     'messages': 1,     # topic names and types, CDR, ros2msg schemas (no rclpy)
     'design': 1,       # sensitivities, tolerance stacks, balance points, sweeps and charts
     'bag': 2,          # MCAP reading and writing, replay, scenarios (no rclpy)
     'view': 2,         # rerun
     'study': 2,        # methods side by side, the 40-digit reference, the bench
+    'report': 2,       # the field-balancing report: HTML and PNG figures
     'ros': 3,          # the node, play, record
     'cli': 4,          # the cvc-balance command
 }
@@ -32,11 +34,13 @@ THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
     'physics': {'numpy', 'yaml'},
     'identify': {'numpy'},
+    'field': {'numpy', 'scipy'},
     'messages': {'ament_index_python'},
     'design': {'numpy', 'scipy', 'yaml', 'matplotlib'},   # matplotlib in design/charts only
     'bag': {'numpy', 'yaml', 'mcap', 'zstandard', 'lz4', 'isal', 'rosbags'},
     'view': {'numpy', 'rerun', 'PIL'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
+    'report': {'numpy', 'matplotlib'},
 }
 
 

@@ -40,6 +40,14 @@ MAX_ANGLE = 1e9
 """Largest |angle|, rad: within it the angles' reduction is exact (1e-32, measured to 1e12)."""
 MAX_NAME = 200
 """Longest name of a layout, component or support, characters."""
+SITE_PLANES = ('I', 'II')
+"""Names of the correction planes that ``balancing.sites`` may give weight sites for."""
+MAX_SITES = 720
+"""Most weight sites per plane (threaded holes every half degree)."""
+MAX_WEIGHT_SIZES = 20
+"""Most weight sizes a kit may list per plane."""
+MAX_STACK = 20
+"""Most weights that may stack at one site."""
 SUPPORT_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 """A support's name: a ROS name token, since it names the topic supports/<name>/load."""
 
@@ -100,20 +108,44 @@ class Support:
 
 
 @dataclass(frozen=True)
+class WeightSites:
+    """
+    Where correction weights can go in one correction plane, and the kit's weights.
+
+    ``plane`` 'I' or 'II'; ``angles`` rad (rotor frame, from rotor X toward rotor Y) of
+    the threaded holes or weight-stack sites; ``radius`` m of the weights' centres of
+    mass; ``masses`` kg, the weight sizes the kit has (ascending), any number of each;
+    ``stack`` how many weights may go on one site.
+    """
+
+    plane: str
+    angles: tuple
+    radius: float
+    masses: tuple
+    stack: int = 1
+
+
+@dataclass(frozen=True)
 class Balancing:
     """
-    Balancing settings: correction planes, radius, ISO grade, service speed.
+    Balancing settings: correction planes, radius, ISO grade, service speed, weight sites.
 
     ``planes`` = (z_I, z_II), m, z_I < z_II, or None (then the two supports';
     with one support, no two-plane resolution). ``correction_radius`` m or
     None (then the largest component radius). ``grade`` mm/s.
-    ``service_speed`` rad/s or None (then the speed asked about).
+    ``service_speed`` rad/s or None (then the speed asked about). ``sites``: a
+    :class:`WeightSites` per plane that has fixed sites (empty: weights anywhere).
     """
 
     planes: tuple = None
     correction_radius: float = None
     grade: float = DEFAULT_GRADE
     service_speed: float = None
+    sites: tuple = ()
+
+    def sites_of(self, plane):
+        """Return the :class:`WeightSites` of plane 'I' or 'II', or None."""
+        return next((s for s in self.sites if s.plane == plane), None)
 
 
 @dataclass(frozen=True)
@@ -144,6 +176,8 @@ class Layout:
         data = {field: getattr(self, field) for field in
                 ('name', 'gravity', 'description')}
         data['balancing'] = asdict(self.balancing)
+        if not self.balancing.sites:     # layouts without weight sites keep their digest
+            del data['balancing']['sites']
         data['supports'] = [asdict(s) for s in self.supports]
         data['components'] = [
             {'name': c.name, 'mass': c.mass, 'radius': c.radius, 'angle': c.angle, 'z': c.z,
@@ -200,6 +234,9 @@ def parse_layout(data):
     if 'gravity' in data:
         gravity = _vector(data['gravity'], 3, 'layout: field gravity')
     balancing = _balancing(data.get('balancing', {}))
+    if balancing.sites and balancing.planes is None and len(supports) != 2:
+        raise LayoutError('layout: field balancing.sites: weight sites need two correction '
+                          'planes (give balancing.planes, or two supports)')
     description = _text(data.get('description', ''), 'layout: field description',
                         allow_empty=True)
     if len(description) > 100 * MAX_NAME:
@@ -341,7 +378,7 @@ def _supports(value):
 
 def _balancing(spec):
     _mapping(spec, 'layout: field balancing')
-    _known_keys(spec, ('planes', 'correction_radius', 'grade', 'service_speed'),
+    _known_keys(spec, ('planes', 'correction_radius', 'grade', 'service_speed', 'sites'),
                 'layout: field balancing')
     planes = None
     if 'planes' in spec:
@@ -359,7 +396,52 @@ def _balancing(spec):
     if 'service_speed' in spec:
         speed = _number(spec['service_speed'], 'layout: field balancing.service_speed',
                         minimum=0.0, strict=True)
-    return Balancing(planes, radius, grade, speed)
+    sites = _sites(spec['sites']) if 'sites' in spec else ()
+    return Balancing(planes, radius, grade, speed, sites)
+
+
+def _sites(spec):
+    where = 'layout: field balancing.sites'
+    _mapping(spec, where)
+    _known_keys(spec, SITE_PLANES, where)
+    return tuple(_plane_sites(spec[plane], plane) for plane in SITE_PLANES if plane in spec)
+
+
+def _plane_sites(spec, plane):
+    where = f'layout: field balancing.sites.{plane}'
+    _mapping(spec, where)
+    _known_keys(spec, ('angles', 'angles_deg', 'radius', 'masses', 'stack'), where)
+    if ('angles' in spec) == ('angles_deg' in spec):
+        raise LayoutError(f'{where}: give exactly one of fields angles (rad) and angles_deg')
+    key = 'angles' if 'angles' in spec else 'angles_deg'
+    values = _bounded_list(spec[key], f'{where}.{key}', MAX_SITES)
+    bound = MAX_ANGLE if key == 'angles' else math.degrees(MAX_ANGLE)
+    angles = [_number(v, f'{where}.{key}[{i}]', bound=bound) for i, v in enumerate(values)]
+    if key == 'angles_deg':
+        angles = [radians(a) for a in angles]
+    wrapped = sorted(math.remainder(a, 2.0 * math.pi) % (2.0 * math.pi) for a in angles)
+    gaps = [b - a for a, b in zip(wrapped, wrapped[1:] + [wrapped[0] + 2.0 * math.pi])]
+    if len(angles) > 1 and min(gaps) < 1e-9:
+        raise LayoutError(f'{where}.{key}: two sites at the same angle')
+    radius = _number(_required(spec, 'radius', where), f'{where}.radius', minimum=0.0,
+                     strict=True)
+    masses = _bounded_list(_required(spec, 'masses', where), f'{where}.masses',
+                           MAX_WEIGHT_SIZES)
+    masses = sorted(_number(v, f'{where}.masses[{i}]', minimum=0.0, strict=True)
+                    for i, v in enumerate(masses))
+    if len(set(masses)) != len(masses):
+        raise LayoutError(f'{where}.masses: each weight size once')
+    stack = spec.get('stack', 1)
+    if isinstance(stack, bool) or not isinstance(stack, int) or not 1 <= stack <= MAX_STACK:
+        raise LayoutError(f'{where}.stack must be a whole number from 1 to {MAX_STACK}, '
+                          f'got {short(stack)}')
+    return WeightSites(plane, tuple(angles), radius, tuple(masses), stack)
+
+
+def _bounded_list(value, where, limit):
+    if not isinstance(value, list) or not 1 <= len(value) <= limit:
+        raise LayoutError(f'{where} must be a list of 1 to {limit} numbers, got {short(value)}')
+    return value
 
 
 def _required(mapping, key, where):

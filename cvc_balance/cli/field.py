@@ -1,0 +1,530 @@
+"""
+Field balancing commands: calibrate, influence, correct and report (README "Field balancing").
+
+``calibrate`` makes influence coefficients from recorded baseline and trial runs and saves
+them; ``influence`` does the same from readings typed in by hand and gives the
+corrections; ``correct`` gives a run's corrections (from coefficients, or from the
+unbalance its load cells identify) with the weights at the layout's sites; ``report``
+writes that as one HTML page with PNG figures. Warnings go to stderr as
+``cvc-balance: warning: ...`` and into the JSON.
+"""
+
+import datetime
+import math
+from pathlib import Path
+import sys
+
+from cvc_balance.cli.arguments import count, positive, print_json
+from cvc_balance.physics.frames import degrees
+
+MAX_RECORD_BYTES = 16 * 2**20
+"""Largest coefficient record read, bytes."""
+
+
+def register(commands):
+    """Add calibrate, influence, correct and report."""
+    calibrate = commands.add_parser(
+        'calibrate', help='influence coefficients from a baseline run and trial-weight runs',
+        description='Read the 1x amplitude and phase of every sensor (load cells, Float64 '
+        'channels) over whole revolutions at steady speed in a baseline run and one run per '
+        'trial weight, and save the influence coefficients (least squares over the runs).')
+    calibrate.add_argument('runs', nargs='+', metavar='RUN', help='BASELINE then one bag per '
+                           'trial, in the order of --trial')
+    calibrate.add_argument('--trial', action='append', required=True,
+                           metavar='PLANE:MASS_KG@ANGLE_DEG,R_M',
+                           help='the trial weight of each trial run, in order (I:0.2@0,0.68)')
+    calibrate.add_argument('--keep-trial', action='store_true',
+                           help='each trial weight stayed on for the runs after it')
+    _run_options(calibrate)
+    calibrate.add_argument('--speed', type=positive, metavar='W',
+                           help='read the runs at this steady speed, rad/s (default: the '
+                           "baseline's)")
+    calibrate.add_argument('--sensor', action='append', metavar='NAME',
+                           help='channel to use (repeat; default: cell forces x, y and every '
+                           'Float64 topic)')
+    calibrate.add_argument('-o', '--output', metavar='FILE', help='save the coefficients '
+                           '(YAML)')
+    calibrate.add_argument('--json', action='store_true', help='print the record as JSON')
+    calibrate.set_defaults(run=run_calibrate)
+
+    influence = commands.add_parser(
+        'influence', help='influence coefficients and corrections from readings by hand',
+        description='Readings typed in as AMPLITUDE@PHASE_DEG per sensor, any unit, any '
+        'instrument: the baseline, then per trial run its plane, its weight (MASS@DEG, any '
+        'mass unit; corrections come in that unit) and the readings with it on.')
+    influence.add_argument('--baseline', nargs='+', required=True, metavar='A',
+                           help='baseline readings, one per sensor (170@112 53@78)')
+    influence.add_argument('--trial', nargs='+', action='append', required=True,
+                           metavar='ARG', help='PLANE MASS@DEG B1 B2 ...: one trial run '
+                           '(repeat per run)')
+    influence.add_argument('--keep-trial', action='store_true',
+                           help='each trial weight stayed on for the runs after it')
+    influence.add_argument('--noise', type=positive, metavar='X',
+                           help="the readings' standard error (their unit): judge trials by "
+                           'signal to noise instead of by relative change')
+    influence.add_argument('--json', action='store_true', help='print one JSON object')
+    influence.set_defaults(run=run_influence)
+
+    for name, helptext in (('correct', 'the corrections of a run, at the layout\'s sites'),
+                           ('report', 'an HTML report of a run\'s corrections, with figures')):
+        command = commands.add_parser(
+            name, help=helptext,
+            description='The corrections of a run: from influence coefficients '
+            '(--coefficients) or, without, from the unbalance its load cells identify; the '
+            'continuous optimum, the vector split between the two nearest sites and a '
+            "mixed-integer plan (HiGHS) with the kit's weights at the layout's "
+            'balancing.sites, each with the residual it leaves and the grade before and '
+            'after.' + (' Writes DIR/report.html and its PNG figures.' if name == 'report'
+                        else ''))
+        command.add_argument('bag', metavar='RUN', help='the run to correct (.mcap)')
+        command.add_argument('--coefficients', metavar='FILE',
+                             help='influence coefficients (from calibrate)')
+        command.add_argument('--layout', metavar='FILE',
+                             help="layout with balancing.sites (default: the bag's)")
+        command.add_argument('--objective', choices=('fewest', 'residual'),
+                             help='fewest weights within the grade (default with a grade '
+                             'or --limit), or the smallest residual')
+        command.add_argument('--limit', type=positive, metavar='X',
+                             help='largest residual reading allowed (the sensors\' unit), '
+                             'with --coefficients')
+        command.add_argument('--max-weights', type=count, metavar='N',
+                             help='most weights in the plan (default for --objective '
+                             'residual: two per plane with sites)')
+        command.add_argument('--time-limit', type=positive, default=30.0, metavar='S',
+                             help='seconds the mixed-integer search may take (default 30)')
+        _run_options(command)
+        if name == 'report':
+            command.add_argument('--after', metavar='BAG', help='a check run after the '
+                                 'weights went on: its identified unbalance is shown too')
+            command.add_argument('-o', '--output', required=True, metavar='DIR',
+                                 help='directory for report.html and its figures')
+        command.add_argument('--json', action='store_true', help='print one JSON object')
+        command.set_defaults(run=run_correct if name == 'correct' else run_report)
+
+
+def _run_options(command):
+    command.add_argument('--speed-tolerance', type=positive, default=1.0, metavar='PERCENT',
+                         help='speeds within this of the steady speed count as steady '
+                         '(default 1 %%)')
+    command.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
+
+
+def warn(lines):
+    """Print each warning on stderr, one line each."""
+    for line in lines:
+        print(f'cvc-balance: warning: {line}', file=sys.stderr)
+
+
+# -- calibrate ---------------------------------------------------------------------------
+
+def run_calibrate(args):
+    """Run ``cvc-balance calibrate``."""
+    import yaml
+
+    from cvc_balance.bag.field_run import calibrate_runs
+    from cvc_balance.field.coefficients import calibration_mapping
+    from cvc_balance.field.notation import bag_trial
+
+    trials = [bag_trial(text) for text in args.trial]
+    if len(args.runs) < 2:
+        raise ValueError('give the baseline run and one run per trial weight')
+    calibration, runs, speed_warnings = calibrate_runs(
+        args.runs[0], args.runs[1:], trials, args.keep_trial, args.sensor, args.speed,
+        args.speed_tolerance / 100.0, args.joint_name)
+    baseline = runs[0]
+    layout = None if baseline.layout is None else \
+        {'name': baseline.layout.name, 'digest': baseline.layout.digest()}
+    record = calibration_mapping(
+        calibration, [baseline.units[n] for n in calibration.sensors], 'kg m',
+        baseline.window.speed, args.keep_trial, trials,
+        [run_identity(run, 'baseline' if k == 0 else f'trial {k}')
+         for k, run in enumerate(runs)], layout)
+    record['warnings'] = speed_warnings + record['warnings']
+    warn(record['warnings'])
+    if args.output:
+        Path(args.output).write_text(
+            '# Influence coefficients (cvc-balance calibrate; README "Field balancing")\n'
+            + yaml.safe_dump(record, sort_keys=False))
+    if args.json:
+        print_json(record)
+    else:
+        print(format_record(record))
+        if args.output:
+            print(f'written: {args.output}')
+    return 0
+
+
+def run_identity(run, role):
+    """Return a run's identity and steady window as plain data."""
+    return {'role': role, 'bag': run.bag, 'date': bag_date(run.first_ns),
+            'speed': run.window.speed, 'revolutions': run.window.revolutions,
+            'window': [run.window.start, run.window.end], 'speed_spread': run.window.spread,
+            'readings': [{'channel': n, 'unit': run.units[n], **_polar(p.value),
+                          'sigma': p.sigma, 'samples': p.samples}
+                         for n, p in run.phasors.items()]}
+
+
+def bag_date(log_ns):
+    """Return a log time (ns since 1970, UTC) as ISO 8601 text."""
+    moment = datetime.datetime.fromtimestamp(log_ns * 1e-9, datetime.timezone.utc)
+    return moment.isoformat(timespec='seconds').replace('+00:00', 'Z')
+
+
+def _polar(value):
+    return {'amplitude': abs(value),
+            'phase_deg': degrees(math.atan2(value.imag, value.real)) % 360.0}
+
+
+def format_record(record):
+    """Format a coefficient record for people."""
+    lines = []
+    for run in record['runs']:
+        lines.append(f"{run['role']}: {run['bag']} at {run['speed']:.4g} rad/s, "
+                     f"{run['revolutions']} revolutions")
+    planes = record['planes']
+    lines.append(f"influence coefficients ({record['reading_units'][0]} per "
+                 f"{record['correction_unit']}), condition number "
+                 f"{_number(record['condition_number'])}:")
+    lines.append(f"  {'sensor':22}" + ''.join(f'{"plane " + p:>26}' for p in planes))
+    for s, name in enumerate(record['sensors']):
+        cells = []
+        for j in range(len(planes)):
+            entry = record['coefficients'][s][j]
+            text = f"{entry['amplitude']:.4g} @ {_deg(entry['phase_deg'])}"
+            if record['ci95'] is not None:
+                text += f" +-{record['ci95'][s][j]:.2g}"
+            cells.append(f'{text:>26}')
+        lines.append(f'  {name:22}' + ''.join(cells))
+    for trial in record['trials']:
+        seen = f"{trial['snr']:.3g} standard errors" if trial['snr'] is not None else \
+            f"{trial['relative_change']:.0%} of the readings"
+        lines.append(f"  trial run {trial['run']} (plane {trial['plane']}): largest change "
+                     f"{trial['largest_change']:.4g} = {seen}")
+    return '\n'.join(lines)
+
+
+def _number(value):
+    return 'inf' if value is None else f'{value:.3g}'
+
+
+def _deg(value):
+    """Return an angle in degrees for people, 0.0-359.9 (359.97 reads 0.0)."""
+    return f'{round(value, 1) % 360.0:.1f}'
+
+
+# -- influence (by hand) -----------------------------------------------------------------
+
+def run_influence(args):
+    """Run ``cvc-balance influence``."""
+    import numpy as np
+
+    from cvc_balance.field import calibrate, continuous_correction, problem_from_readings
+    from cvc_balance.field.notation import hand_trial, reading
+
+    baseline = [reading(text, f'baseline reading {k + 1}') for k, text in
+                enumerate(args.baseline)]
+    trials, readings = [], []
+    for k, values in enumerate(args.trial):
+        if len(values) != 2 + len(baseline):
+            raise ValueError(f'--trial {k + 1}: give PLANE MASS@DEG and {len(baseline)} '
+                             f'readings (one per sensor, as the baseline), got '
+                             f'{len(values)} values')
+        trials.append(hand_trial(values[0], values[1]))
+        readings.append([reading(text, f'trial {k + 1} reading {s + 1}')
+                         for s, text in enumerate(values[2:])])
+    sigma = None if args.noise is None else np.full(len(baseline), args.noise)
+    calibration = calibrate(baseline, trials, readings, None, args.keep_trial, sigma,
+                            None if sigma is None else np.tile(sigma, (len(trials), 1)))
+    problem = problem_from_readings(calibration, baseline, unit='trial mass unit')
+    correction = continuous_correction(problem)
+    residual = problem.residual(correction)
+    summary = {
+        'planes': list(calibration.planes), 'sensors': len(baseline),
+        'coefficients': [[_polar(v) for v in row] for row in calibration.matrix],
+        'ci95': None if calibration.ci95 is None else calibration.ci95.tolist(),
+        'condition_number': calibration.condition if math.isfinite(calibration.condition)
+        else None,
+        'corrections': [{'plane': p, 'mass': abs(u),
+                         'angle_deg': degrees(math.atan2(u.imag, u.real)) % 360.0}
+                        for p, u in zip(calibration.planes, correction)],
+        'residual': [_polar(r) for r in residual],
+        'residual_rms': float(np.sqrt(np.mean(np.abs(residual) ** 2))),
+        'keep_trial': args.keep_trial,
+        'trials': [{'run': c.run + 1, 'plane': c.plane, 'largest_change': c.change,
+                    'snr': c.snr, 'relative_change': c.relative, 'too_small': c.too_small,
+                    'weak': c.weak} for c in calibration.checks],
+        'warnings': list(calibration.warnings),
+    }
+    if args.keep_trial:
+        on = {p: 0j for p in calibration.planes}
+        for trial in trials:
+            on[trial.plane] += trial.unbalance
+        summary['add_to_trials'] = [
+            {'plane': p, 'mass': abs(u - on[p]),
+             'angle_deg': degrees(math.atan2((u - on[p]).imag, (u - on[p]).real)) % 360.0}
+            for p, u in zip(calibration.planes, correction)]
+    warn(summary['warnings'])
+    if args.json:
+        print_json(summary)
+        return 0
+    lines = [f"influence coefficients (reading per trial mass unit), condition number "
+             f"{_number(summary['condition_number'])}:"]
+    for s, row in enumerate(summary['coefficients']):
+        lines.append(f'  sensor {s + 1}: ' + '   '.join(
+            f"plane {p}: {e['amplitude']:.4g} @ {_deg(e['phase_deg'])}"
+            for p, e in zip(summary['planes'], row)))
+    lines.append('corrections (remove the trial weights; same mass unit as the trials):')
+    for c in summary['corrections']:
+        lines.append(f"  plane {c['plane']}: {c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
+    for c in summary.get('add_to_trials', ()):
+        lines.append(f"  with the trials left on, add in plane {c['plane']}: "
+                     f"{c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
+    lines.append('residual readings: ' + ', '.join(
+        f"{r['amplitude']:.3g} @ {r['phase_deg']:.0f}" for r in summary['residual']))
+    print('\n'.join(lines))
+    return 0
+
+
+# -- correct and report ------------------------------------------------------------------
+
+def read_coefficients(path):
+    """Return (Calibration, record) of a coefficient file (YAML or JSON)."""
+    from cvc_balance.field.coefficients import calibration_from_mapping
+    from cvc_balance.physics.layout_file import _parse     # the hardened YAML/JSON reader
+
+    with open(path, 'rb') as stream:
+        data = stream.read(MAX_RECORD_BYTES + 1)
+    if len(data) > MAX_RECORD_BYTES:
+        raise ValueError(f'{path}: over {MAX_RECORD_BYTES} bytes: not a coefficient record')
+    try:
+        text = data.decode('utf-8')
+    except UnicodeDecodeError:
+        raise ValueError(f'{path}: not UTF-8 text') from None
+    return calibration_from_mapping(_parse(text, str(path)), str(path))
+
+
+def correction_summary(args):
+    """Compute the corrections the arguments ask for; return (summary, FieldCorrection)."""
+    from cvc_balance.bag.field_run import correct_run
+
+    calibration = record = None
+    if args.coefficients:
+        calibration, record = read_coefficients(args.coefficients)
+    result = correct_run(args.bag, calibration, record, args.layout, args.objective,
+                         args.limit, args.max_weights, args.speed_tolerance / 100.0,
+                         args.joint_name, args.time_limit)
+    return summarise(result, record), result
+
+
+def run_correct(args):
+    """Run ``cvc-balance correct``."""
+    summary, _ = correction_summary(args)
+    warn(summary['warnings'])
+    if args.json:
+        print_json(summary)
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def run_report(args):
+    """Run ``cvc-balance report``."""
+    from cvc_balance.report import write_report
+
+    summary, result = correction_summary(args)
+    if args.after:
+        summary['measured_after'] = measured_after(args.after, args, result)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    files = write_report(summary, out)
+    warn(summary['warnings'])
+    if args.json:
+        print_json({'report': str(out / 'report.html'), 'files': [str(f) for f in files],
+                    'summary': summary})
+    else:
+        print(format_summary(summary))
+        print(f"report: {out / 'report.html'} ({len(files) - 1} figures)")
+    return 0
+
+
+def measured_after(path, args, result):
+    """Return the identified unbalance of a check run, per plane, and its grade."""
+    from cvc_balance.bag.field_run import grade_view, read_run
+
+    if result.grade is None:
+        raise ValueError('--after needs load cells and a layout with two correction planes '
+                         'in the run (to compare the identified unbalance)')
+    run = read_run(path, None, None, args.speed_tolerance / 100.0, args.joint_name,
+                   args.layout)
+    view = grade_view(run, args.layout, args.joint_name)
+    if view is None:
+        raise ValueError(f'{path}: no load cells to identify the unbalance after the '
+                         'correction from')
+    grade = result.grade
+    value = grade.equivalent_grade(view.before)
+    return plain({'bag': str(path), 'date': bag_date(run.first_ns),
+                  'layout': _layout(run.layout), 'speed': run.window.speed,
+                  'equivalent_grade': value, 'within_grade': value <= grade.grade,
+                  'planes': [_plane_vector(p, z, u, ci) for p, z, u, ci in
+                             zip(view.planes, view.z, view.before, view.ci95)]})
+
+
+def _layout(layout):
+    return None if layout is None else {'name': layout.name, 'digest': layout.digest()}
+
+
+def _plane_vector(plane, z, value, ci95=None, permissible=None):
+    out = {'plane': plane, 'z': z, 'g_mm': abs(value) * 1e6,
+           'angle_deg': degrees(math.atan2(value.imag, value.real)) % 360.0}
+    if ci95 is not None:
+        out['ci95_g_mm'] = ci95 * 1e6 if math.isfinite(ci95) else None
+    if permissible is not None:
+        out['permissible_g_mm'] = permissible * 1e6
+    return out
+
+
+def summarise(result, record=None):
+    """Return a FieldCorrection as JSON-able data (schema in the README)."""
+    run, problem, grade = result.run, result.problem, result.grade
+    planes = []
+    for plane in problem.planes:
+        sites = result.sites.get(plane)
+        planes.append({'name': plane, 'radius': result.radius.get(plane),
+                       'sites': None if sites is None else {
+                           'angles_deg': [degrees(a) % 360.0 for a in sites.angles],
+                           'masses': list(sites.masses), 'stack': sites.stack}})
+    summary = {
+        'run': {'bag': run.bag, 'date': bag_date(run.first_ns), 'layout': _layout(run.layout),
+                'speed': run.window.speed, 'revolutions': run.window.revolutions,
+                'window': [run.window.start, run.window.end],
+                'speed_spread': run.window.spread},
+        'method': result.method, 'unit': problem.unit, 'objective': result.objective,
+        'max_weights': result.max_weights, 'planes': planes,
+        'readings': [{'channel': n, 'unit': run.units[n], **_polar(p.value), 'sigma': p.sigma}
+                     for n, p in run.phasors.items()],
+        'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
+    }
+    if result.method == 'influence coefficients':
+        summary['coefficients'] = {
+            'sensors': list(problem.channels), 'planes': list(problem.planes),
+            'values': [[_polar(v) for v in row] for row in problem.influence],
+            'condition_number': record.get('condition_number') if record else None,
+            'reading_units': record.get('reading_units') if record else None,
+            'runs': [{k: r.get(k) for k in ('role', 'bag', 'date', 'speed')}
+                     for r in (record or {}).get('runs', []) if isinstance(r, dict)]}
+    if grade is not None:
+        before = grade.equivalent_grade(grade.before)
+        summary['grade'] = {
+            'grade': grade.grade, 'speed': grade.speed, 'mass': grade.mass,
+            'before': {'equivalent_grade': before, 'within_grade': before <= grade.grade,
+                       'planes': [_plane_vector(p, z, u, ci, per) for p, z, u, ci, per in
+                                  zip(grade.planes, grade.z, grade.before, grade.ci95,
+                                      grade.permissible)]}}
+    for plan in result.plans:
+        summary['plans'].append(_plan(plan, problem, result, grade))
+    feasible = [p for p in summary['plans'] if p['name'] != 'continuous'
+                and p['status'] in ('optimal', 'time limit')]
+    summary['recommended'] = 'optimal' if feasible else \
+        ('split' if len(summary['plans']) > 1 else 'continuous')
+    best = next(p for p in summary['plans'] if p['name'] == summary['recommended'])
+    if best['after'] is not None and not best['after']['within_grade']:
+        summary['warnings'].append(f"the {best['name']} plan does not bring the rotor within "
+                                   f"G {grade.grade:g} (G {best['after']['equivalent_grade']:.3g}"
+                                   ' predicted)')
+    for plan in result.plans:
+        if plan.status == 'infeasible':
+            summary['warnings'].append('no plan with this kit meets the limits (even the '
+                                       'identification\'s 95 % radius spared): ' + plan.note)
+        elif plan.status == 'time limit':
+            summary['warnings'].append(
+                'the mixed-integer search stopped at its time limit: the plan is the best '
+                f'found, and HiGHS\'s bound leaves a gap of {plan.gap:.0%} (for the smallest '
+                'residual the bound is the continuous optimum: weak; --time-limit for more, '
+                'or --objective fewest with --limit)')
+        elif plan.note:
+            summary['warnings'].append(plan.note)
+    return plain(summary)
+
+
+def plain(data):
+    """Return ``data`` with numpy scalars as Python numbers (for JSON and YAML)."""
+    if isinstance(data, dict):
+        return {key: plain(value) for key, value in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [plain(value) for value in data]
+    if hasattr(data, 'item') and not isinstance(data, (str, bytes)):
+        return data.item()
+    return data
+
+
+def _plan(plan, problem, result, grade):
+    corrections = []
+    for plane, u in zip(problem.planes, plan.corrections):
+        radius = result.radius.get(plane)
+        corrections.append({
+            'plane': plane, 'unbalance': abs(u),
+            'mass': abs(u) / radius if radius else None, 'radius': radius,
+            'angle_deg': degrees(math.atan2(u.imag, u.real)) % 360.0})
+    residual = plan.residual
+    after = None
+    if grade is not None and problem.unit == 'kg m':
+        values = grade.after(plan, problem.planes)
+        value = grade.equivalent_grade(values)
+        after = {'equivalent_grade': value, 'within_grade': value <= grade.grade,
+                 'planes': [_plane_vector(p, z, u) for p, z, u in
+                            zip(grade.planes, grade.z, values)]}
+    return {
+        'name': plan.name, 'status': plan.status,
+        'gap': plan.gap if math.isfinite(plan.gap) else None, 'note': plan.note,
+        'corrections': corrections,
+        'weights': [{'plane': w.plane, 'angle_deg': degrees(w.angle) % 360.0,
+                     'radius': w.radius, 'masses': list(w.masses), 'mass': w.mass}
+                    for w in plan.weights],
+        'count': plan.count,
+        'residual': {'channels': [{'name': n, **_polar(v)}
+                                  for n, v in zip(problem.channels, residual.values)],
+                     'rms': residual.rms, 'total': residual.total,
+                     'worst_of_limit': residual.worst},
+        'after': after,
+    }
+
+
+def format_summary(summary):
+    """Format a correction summary for people (g, g mm, degrees)."""
+    run = summary['run']
+    layout = run['layout']
+    lines = [f"run {run['bag']} ({run['date']}), layout "
+             + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
+             + f": {run['revolutions']} revolutions at {run['speed']:.4g} rad/s",
+             f"corrections from the {summary['method']}"]
+    grade = summary['grade']
+    if grade is not None:
+        before = grade['before']
+        lines.append(f"before: G {before['equivalent_grade']:.3g} "
+                     f"({'within' if before['within_grade'] else 'OUT OF'} G {grade['grade']:g}"
+                     f" at {grade['speed']:.4g} rad/s); " + ', '.join(
+                         f"plane {p['plane']} {p['g_mm']:.0f} g mm at {_deg(p['angle_deg'])} deg "
+                         f"(allowed {p['permissible_g_mm']:.0f})" for p in before['planes']))
+    for plan in summary['plans']:
+        mark = ' (recommended)' if plan['name'] == summary['recommended'] else ''
+        lines.append(f"{plan['name']}{mark}: {plan['status']}"
+                     + (f", {plan['count']} weights" if plan['name'] != 'continuous' else ''))
+        if plan['name'] == 'continuous':
+            for c in plan['corrections']:
+                mass = f"{c['mass'] * 1000:.1f} g at r {c['radius']:.3f} m" \
+                    if c['mass'] is not None and summary['unit'] == 'kg m' \
+                    else f"{c['unbalance']:.4g} {summary['unit']}"
+                lines.append(f"  plane {c['plane']}: {mass}, {_deg(c['angle_deg'])} deg")
+        for w in plan['weights']:
+            lines.append(f"  plane {w['plane']} site {_deg(w['angle_deg']):>5} deg: "
+                         + ' + '.join(f'{m * 1000:g} g' for m in w['masses']))
+        after = plan['after']
+        residual = f"residual rms {plan['residual']['rms']:.3g}"
+        if after is not None:
+            residual += f"; after: G {after['equivalent_grade']:.3g} (" + ', '.join(
+                f"{p['g_mm']:.0f} g mm" for p in after['planes']) + ')'
+        lines.append('  ' + residual)
+    measured = summary.get('measured_after')
+    if measured is not None:
+        lines.append(f"measured after ({measured['bag']}): G {measured['equivalent_grade']:.3g}")
+    return '\n'.join(lines)

@@ -1,0 +1,175 @@
+"""
+The influence-coefficient record: a :class:`Calibration` as a mapping and back.
+
+The record (YAML or JSON; README "Field balancing") holds what a later correction needs
+(planes, sensors, the coefficients per sensor and plane as amplitude and phase, their 95 %
+radii, the speed and units) and what a reader needs to trust it (the runs it came from,
+each trial's visibility, the warnings). No file I/O: the command line reads and writes
+the text. :func:`calibration_from_mapping` checks a record as layouts are checked:
+unknown fields are errors, numbers finite and bounded, one line naming what is wrong.
+"""
+
+import cmath
+import math
+
+import numpy as np
+
+from cvc_balance.field.influence import Calibration
+from cvc_balance.physics.layout import MAX_MAGNITUDE, short
+
+KIND = 'cvc_balance influence coefficients'
+VERSION = 1
+FIELDS = ('kind', 'version', 'planes', 'sensors', 'reading_units', 'correction_unit', 'speed',
+          'condition_number', 'coefficients', 'ci95', 'keep_trial', 'trials', 'runs',
+          'layout', 'warnings')
+
+
+class CoefficientsError(ValueError):
+    """A coefficient record that cannot be used; ``str()`` is one line naming what."""
+
+
+def polar(value):
+    """Return a complex value as {amplitude, phase_deg} (phase in [0, 360))."""
+    value = complex(value)
+    return {'amplitude': abs(value), 'phase_deg': math.degrees(cmath.phase(value)) % 360.0}
+
+
+def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
+                        keep_trial=False, trials=(), runs=(), layout=None):
+    """
+    Return the record of ``calibration`` as plain data (YAML/JSON-able).
+
+    ``reading_units`` one per sensor; ``correction_unit`` the unbalance unit ('kg m', or
+    the trial's mass unit); ``speed`` rad/s or None; ``trials`` the
+    :class:`~cvc_balance.field.influence.Trial` per run; ``runs`` per run identity
+    mappings; ``layout`` {name, digest} or None.
+    """
+    ci95 = None if calibration.ci95 is None else np.asarray(calibration.ci95).tolist()
+    checks = []
+    for check, trial in zip(calibration.checks, trials):
+        checks.append({'run': check.run + 1, 'plane': trial.plane, 'mass': float(trial.mass),
+                       'angle_deg': math.degrees(trial.angle), 'radius': float(trial.radius),
+                       'largest_change': float(check.change),
+                       'snr': None if check.snr is None else float(check.snr),
+                       'relative_change': float(check.relative),
+                       'too_small': bool(check.too_small), 'weak': bool(check.weak)})
+    condition = float(calibration.condition)
+    return {
+        'kind': KIND, 'version': VERSION,
+        'planes': list(calibration.planes), 'sensors': list(calibration.sensors),
+        'reading_units': list(reading_units), 'correction_unit': correction_unit,
+        'speed': None if speed is None else float(speed),
+        'condition_number': condition if math.isfinite(condition) else None,
+        'coefficients': [[polar(v) for v in row] for row in np.asarray(calibration.matrix)],
+        'ci95': ci95, 'keep_trial': bool(keep_trial), 'trials': checks, 'runs': list(runs),
+        'layout': layout, 'warnings': list(calibration.warnings),
+    }
+
+
+def calibration_from_mapping(data, source='coefficients'):
+    """
+    Return (Calibration, record) of a record read from YAML/JSON; checks every field used.
+
+    Raises :class:`CoefficientsError`. The condition number is computed again from the
+    coefficients; trial checks are not rebuilt (the record's ``trials`` stay as read).
+    """
+    if not isinstance(data, dict):
+        raise CoefficientsError(f'{source}: expected a mapping of fields, got '
+                                f'{type(data).__name__}')
+    for key in data:
+        if key not in FIELDS:
+            raise CoefficientsError(f'{source}: unknown field {short(key)} (known: '
+                                    f'{", ".join(FIELDS)})')
+    if data.get('kind') != KIND:
+        raise CoefficientsError(f'{source}: field kind must be {KIND!r}, got '
+                                f'{short(data.get("kind"))}: not an influence-coefficient '
+                                'record')
+    if data.get('version') != VERSION:
+        raise CoefficientsError(f'{source}: field version must be {VERSION}, got '
+                                f'{short(data.get("version"))}')
+    planes = _names(data.get('planes'), f'{source}: field planes')
+    sensors = _names(data.get('sensors'), f'{source}: field sensors')
+    rows = data.get('coefficients')
+    if not isinstance(rows, list) or len(rows) != len(sensors):
+        raise CoefficientsError(f'{source}: field coefficients needs one row per sensor '
+                                f'({len(sensors)}), got {short(rows)}')
+    matrix = np.zeros((len(sensors), len(planes)), complex)
+    for s, row in enumerate(rows):
+        where = f'{source}: field coefficients[{s}]'
+        if not isinstance(row, list) or len(row) != len(planes):
+            raise CoefficientsError(f'{where}: needs one entry per plane ({len(planes)}), '
+                                    f'got {short(row)}')
+        for j, entry in enumerate(row):
+            matrix[s, j] = _polar(entry, f'{where}[{j}]')
+    ci95 = data.get('ci95')
+    if ci95 is not None:
+        values = np.array([[_number(v, f'{source}: field ci95') for v in row]
+                           for row in _rows(ci95, len(sensors), len(planes), source)])
+        ci95 = values
+    units = data.get('reading_units', [''] * len(sensors))
+    if not isinstance(units, list) or len(units) != len(sensors) \
+            or not all(isinstance(u, str) for u in units):
+        raise CoefficientsError(f'{source}: field reading_units needs a text per sensor')
+    if not isinstance(data.get('correction_unit', 'kg m'), str):
+        raise CoefficientsError(f'{source}: field correction_unit must be text')
+    speed = data.get('speed')
+    if speed is not None:
+        speed = _number(speed, f'{source}: field speed')
+        if not speed > 0.0:
+            raise CoefficientsError(f'{source}: field speed must be > 0 rad/s, got {speed:g}')
+    warnings = data.get('warnings', [])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise CoefficientsError(f'{source}: field warnings must be a list of text')
+    for key in ('trials', 'runs'):
+        if not isinstance(data.get(key, []), list):
+            raise CoefficientsError(f'{source}: field {key} must be a list')
+    if not isinstance(data.get('keep_trial', False), bool):
+        raise CoefficientsError(f'{source}: field keep_trial must be true or false')
+    singular = np.linalg.svd(matrix, compute_uv=False)
+    if not singular[-1] > 0.0:
+        raise CoefficientsError(f'{source}: the coefficients are singular (a plane acts on '
+                                'no sensor, or two planes alike): no correction follows')
+    calibration = Calibration(tuple(planes), tuple(sensors), matrix, ci95,
+                              float(singular[0] / singular[-1]), (), tuple(warnings))
+    record = dict(data, reading_units=units, speed=speed,
+                  correction_unit=data.get('correction_unit', 'kg m'))
+    return calibration, record
+
+
+def _names(value, where):
+    if not isinstance(value, list) or not value or len(value) > 1000 \
+            or not all(isinstance(v, str) and 0 < len(v) <= 200 and v.isprintable()
+                       for v in value):
+        raise CoefficientsError(f'{where}: give a list of names, got {short(value)}')
+    if len(set(value)) != len(value):
+        raise CoefficientsError(f'{where}: each name once')
+    return value
+
+
+def _rows(value, count, width, source):
+    if not isinstance(value, list) or len(value) != count or \
+            not all(isinstance(r, list) and len(r) == width for r in value):
+        raise CoefficientsError(f'{source}: field ci95 needs {count} rows of {width} numbers')
+    return value
+
+
+def _number(value, where):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CoefficientsError(f'{where} must be a number, got {short(value)}')
+    if isinstance(value, int) and abs(value) > MAX_MAGNITUDE:
+        raise CoefficientsError(f'{where} must be within +-{MAX_MAGNITUDE:g}')
+    value = float(value)
+    if not math.isfinite(value) or abs(value) > MAX_MAGNITUDE:
+        raise CoefficientsError(f'{where} must be finite and within +-{MAX_MAGNITUDE:g}, '
+                                f'got {short(value)}')
+    return value
+
+
+def _polar(entry, where):
+    if not isinstance(entry, dict) or set(entry) != {'amplitude', 'phase_deg'}:
+        raise CoefficientsError(f'{where}: give {{amplitude, phase_deg}}, got {short(entry)}')
+    amplitude = _number(entry['amplitude'], f'{where}.amplitude')
+    if amplitude < 0.0:
+        raise CoefficientsError(f'{where}.amplitude must be >= 0, got {amplitude:g}')
+    phase = _number(entry['phase_deg'], f'{where}.phase_deg')
+    return cmath.rect(amplitude, math.radians(phase))

@@ -1,0 +1,170 @@
+"""
+The field-balancing report: one HTML page (no scripts, no network) beside its PNG figures.
+
+At the top the verdict (the grade before and after, in or out), then what to bolt where,
+the figures, the plans compared, the run's identity (bag, date, layout name and digest,
+speed, revolutions), the coefficients used and every warning. Every text from the run
+(paths, names) is escaped.
+"""
+
+import datetime
+from html import escape
+
+STYLE = '''
+body { font-family: sans-serif; margin: 1.5em auto; max-width: 62em; color: #222; }
+h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.15em; margin-top: 1.6em; }
+.verdict { display: flex; gap: 1em; margin: 1em 0; }
+.verdict div { flex: 1; padding: 0.8em 1em; border-radius: 6px; color: white; }
+.ok { background: #2e7d32; } .out { background: #c62828; } .unknown { background: #616161; }
+.verdict b { font-size: 1.6em; display: block; }
+table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.92em; }
+td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: right; }
+th { background: #eee; } td.text, th.text { text-align: left; }
+.bolt td { font-size: 1.1em; } .warning { background: #fff3e0; border-left: 4px solid #ef6c00;
+padding: 0.4em 0.8em; margin: 0.3em 0; }
+figure { display: inline-block; margin: 0.5em 1%; width: 47%; vertical-align: top; }
+figure img { width: 100%; } .small { color: #666; font-size: 0.85em; }
+'''
+
+
+def _deg(value):
+    """Return an angle in degrees for people, 0.0-359.9 (359.97 reads 0.0)."""
+    return f'{round(value, 1) % 360.0:.1f}'
+
+
+def _grade_box(label, value, grade):
+    if value is None:
+        return f'<div class="unknown">{escape(label)}<b>no grade</b>no load cells</div>'
+    within = value <= grade
+    verdict = f'within G {grade:g}' if within else f'OUT OF G {grade:g}'
+    return (f'<div class="{"ok" if within else "out"}">{escape(label)}'
+            f'<b>G {value:.2f}</b>{verdict}</div>')
+
+
+def _table(header, rows, text_columns=1, css=''):
+    head = ''.join(f'<th class="text">{escape(h)}</th>' if i < text_columns
+                   else f'<th>{escape(h)}</th>' for i, h in enumerate(header))
+    body = ''.join('<tr>' + ''.join(
+        f'<td class="text">{escape(str(c))}</td>' if i < text_columns
+        else f'<td>{escape(str(c))}</td>' for i, c in enumerate(row)) + '</tr>' for row in rows)
+    return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
+
+
+def page(summary, figures, generated=None):
+    """
+    Return the report's HTML text.
+
+    ``figures``: [(file name, caption)] of the PNGs beside the page; ``generated`` the
+    time the report is made (default now, UTC).
+    """
+    generated = generated or datetime.datetime.now(datetime.timezone.utc)
+    run, grade = summary['run'], summary['grade']
+    plan = next(p for p in summary['plans'] if p['name'] == summary['recommended'])
+    layout = run['layout']
+    title = f"Field balancing report: {layout['name'] if layout else run['bag']}"
+    parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+             f'<title>{escape(title)}</title><style>{STYLE}</style></head><body>',
+             f'<h1>{escape(title)}</h1>',
+             f'<p class="small">run {escape(run["bag"])}, recorded {escape(run["date"])}; '
+             f'layout {escape(layout["name"]) if layout else "none"} '
+             f'(digest {escape(layout["digest"]) if layout else "-"})</p>']
+    if grade is not None:
+        after = plan['after']['equivalent_grade'] if plan['after'] else None
+        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade']),
+                 _grade_box(f'after the {plan["name"]} plan (predicted)', after,
+                            grade['grade'])]
+        measured = summary.get('measured_after')
+        if measured is not None:
+            boxes.append(_grade_box('measured after', measured['equivalent_grade'],
+                                    grade['grade']))
+        parts.append('<div class="verdict" id="verdict">' + ''.join(boxes) + '</div>')
+        parts.append(f'<p>ISO 21940-11 grade G {grade["grade"]:g} at '
+                     f'{grade["speed"]:.4g} rad/s ({grade["speed"] * 30 / 3.141592653589793:.0f} '
+                     f'rpm), rotor {grade["mass"]:.1f} kg.</p>')
+    else:
+        parts.append('<div class="verdict" id="verdict">'
+                     + _grade_box('grade', None, 0.0) + '</div>')
+    parts.append('<h2 id="bolt">What to bolt where</h2>')
+    if plan['weights']:
+        rows = [(w['plane'], _deg(w['angle_deg']), f"{w['radius']:.3f}",
+                 ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
+                for w in plan['weights']]
+        parts.append(_table(('plane', 'site angle [deg]', 'radius [m]', 'weights',
+                             'total [g]'), rows, 1, 'bolt'))
+        if plan['name'] == 'split':
+            how = 'the vector split of the continuous correction, rounded to the kit'
+        elif summary['objective'] == 'fewest':
+            how = 'the fewest weights within the limits (mixed-integer plan, HiGHS: ' \
+                f'{plan["status"]})'
+        else:
+            how = f'the smallest residual with at most {summary["max_weights"]} weights ' \
+                f'(mixed-integer plan, HiGHS: {plan["status"]})'
+        parts.append(f'<p>{plan["count"]} weights: {escape(how)}. Angles in the rotor frame, '
+                     'from rotor X toward rotor Y; radius of the weights\' centres.</p>')
+    else:
+        rows = [(c['plane'], _deg(c['angle_deg']),
+                 f"{c['radius']:.3f}" if c['radius'] else '-',
+                 f"{c['mass'] * 1000:.1f}" if c['mass'] is not None and
+                 summary['unit'] == 'kg m' else f"{c['unbalance']:.4g} {summary['unit']}")
+                for c in plan['corrections']]
+        parts.append(_table(('plane', 'angle [deg]', 'radius [m]', 'mass [g]'), rows, 1,
+                            'bolt'))
+        parts.append('<p>The layout gives no weight sites: the continuous correction.</p>')
+    if summary['warnings']:
+        parts.append('<h2>Warnings</h2>' + ''.join(
+            f'<div class="warning">{escape(w)}</div>' for w in summary['warnings']))
+    parts.append('<h2>Figures</h2>' + ''.join(
+        f'<figure><img src="{escape(name)}" alt="{escape(caption)}">'
+        f'<figcaption class="small">{escape(caption)}</figcaption></figure>'
+        for name, caption in figures))
+    parts.append('<h2>Plans compared</h2>')
+    rows = []
+    for p in summary['plans']:
+        after = p['after']
+        rows.append((p['name'], p['status'], p['count'] if p['name'] != 'continuous' else '-',
+                     f"{p['residual']['rms']:.4g}",
+                     f"G {after['equivalent_grade']:.2f}" if after else '-',
+                     ', '.join(f"{q['g_mm']:.0f}" for q in after['planes']) if after else '-'))
+    parts.append(_table(('plan', 'status', 'weights', 'residual rms', 'grade after',
+                         'unbalance after [g mm]'), rows, 2))
+    parts.append(f'<p class="small">Corrections from the {escape(summary["method"])}; '
+                 f'objective: {escape(summary["objective"])}. The residual rms is taken '
+                 'over the channels, each weighted (by its noise, or by its permissible '
+                 'unbalance).</p>')
+    if grade is not None:
+        rows = [(q['plane'], f"{q['z']:+.3f}", f"{q['g_mm']:.0f}", _deg(q['angle_deg']),
+                 f"{q['ci95_g_mm']:.0f}" if q.get('ci95_g_mm') is not None else '-',
+                 f"{q['permissible_g_mm']:.0f}") for q in grade['before']['planes']]
+        parts.append('<h2>Unbalance before (identified from the load cells)</h2>'
+                     + _table(('plane', 'z [m]', 'U [g mm]', 'angle [deg]', '95 % [g mm]',
+                               'allowed [g mm]'), rows))
+    rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
+            ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+            ('steady speed', f"{run['speed']:.5g} rad/s (spread {run['speed_spread']:.2%})"),
+            ('read over', f"{run['revolutions']} whole revolutions, {run['window'][0]:.3f}-"
+                          f"{run['window'][1]:.3f} s")]
+    measured = summary.get('measured_after')
+    if measured is not None:
+        rows.append(('check run after', f"{measured['bag']} ({measured['date']}): G "
+                     f"{measured['equivalent_grade']:.2f}, " + ', '.join(
+                         f"plane {q['plane']} {q['g_mm']:.0f} g mm" for q in
+                         measured['planes'])))
+    parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
+    parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
+                        [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
+                          _deg(r['phase_deg']), f"{r['sigma']:.2g}")
+                         for r in summary['readings']], 2))
+    coefficients = summary['coefficients']
+    if coefficients is not None:
+        condition = coefficients['condition_number']
+        parts.append('<h2>Influence coefficients used</h2>' + _table(
+            ['sensor'] + [f'plane {p}' for p in coefficients['planes']],
+            [[s] + [f"{e['amplitude']:.4g} @ {_deg(e['phase_deg'])}" for e in row]
+             for s, row in zip(coefficients['sensors'], coefficients['values'])]))
+        parts.append(f'<p>Reading per {escape(summary["unit"])}; condition number '
+                     f'{"inf" if condition is None else f"{condition:.3g}"}; from '
+                     + ', '.join(escape(f"{r['role']}: {r['bag']}")
+                                 for r in coefficients['runs']) + '.</p>')
+    parts.append(f'<p class="small">cvc-balance report, generated '
+                 f'{escape(generated.isoformat(timespec="seconds"))}.</p></body></html>')
+    return '\n'.join(parts)

@@ -1,0 +1,108 @@
+"""The layout's weight sites (balancing.sites): accepted, refused with one line, digests kept."""
+
+from dataclasses import asdict
+import hashlib
+import json
+import math
+from pathlib import Path
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from cvc_balance.physics.layout import LayoutError, parse_layout
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def gantry():
+    return yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
+
+
+def with_sites(sites):
+    layout = gantry()
+    layout['balancing']['sites'] = sites
+    return layout
+
+
+GOOD = {'I': {'angles_deg': [0, 90, 180, 270], 'radius': 0.68, 'masses': [0.1, 0.05],
+              'stack': 2},
+        'II': {'angles': [0.0, 2.0], 'radius': 0.5, 'masses': [0.2]}}
+
+
+def test_sites_are_read():
+    layout = parse_layout(with_sites(GOOD))
+    first, second = layout.balancing.sites
+    assert first.plane == 'I' and second.plane == 'II'
+    assert [round(math.degrees(a), 12) for a in first.angles] == [0, 90, 180, 270]
+    assert first.masses == (0.05, 0.1) and first.stack == 2 and first.radius == 0.68
+    assert second.angles == (0.0, 2.0) and second.stack == 1
+    assert layout.balancing.sites_of('II') is second
+    assert parse_layout(gantry()).balancing.sites == ()
+
+
+def test_layouts_without_sites_keep_their_digest():
+    # The digest as it was before sites existed: SHA-256 of asdict's canonical JSON.
+    layout = parse_layout(gantry())
+    data = asdict(layout)
+    del data['balancing']['sites']
+    text = json.dumps(data, sort_keys=True, separators=(',', ':'))
+    assert layout.digest() == hashlib.sha256(text.encode()).hexdigest()[:12]
+    assert parse_layout(with_sites(GOOD)).digest() != layout.digest()
+
+
+BAD_SITES = {
+    'plane III': ({'III': GOOD['I']}, 'unknown field', 'III'),
+    'no angles': ({'I': {'radius': 0.5, 'masses': [0.1]}}, 'balancing.sites.I',
+                  'exactly one of fields angles'),
+    'both angles': ({'I': dict(GOOD['I'], angles=[0.0])}, 'exactly one'),
+    'empty angles': ({'I': dict(GOOD['I'], angles_deg=[])}, 'angles_deg', '1 to 720'),
+    'same angle twice': ({'I': dict(GOOD['I'], angles_deg=[0, 360])}, 'same angle'),
+    'nan angle': ({'I': dict(GOOD['I'], angles_deg=[0, math.nan])}, 'angles_deg[1]',
+                  'finite'),
+    'text angle': ({'I': dict(GOOD['I'], angles_deg=[0, 'north'])}, 'angles_deg[1]',
+                   'number'),
+    'zero radius': ({'I': dict(GOOD['I'], radius=0.0)}, 'sites.I.radius', '> 0'),
+    'no masses': ({'I': dict(GOOD['I'], masses=[])}, 'masses', '1 to 20'),
+    'negative mass': ({'I': dict(GOOD['I'], masses=[0.1, -0.2])}, 'masses[1]', '> 0'),
+    'same size twice': ({'I': dict(GOOD['I'], masses=[0.1, 0.1])}, 'each weight size once'),
+    'fractional stack': ({'I': dict(GOOD['I'], stack=1.5)}, 'stack', 'whole number'),
+    'boolean stack': ({'I': dict(GOOD['I'], stack=True)}, 'stack', 'whole number'),
+    'huge stack': ({'I': dict(GOOD['I'], stack=10**6)}, 'stack', '1 to 20'),
+    'unknown key': ({'I': dict(GOOD['I'], colour='red')}, 'unknown field', 'colour'),
+    'too many sites': ({'I': dict(GOOD['I'], angles_deg=[k * 0.1 for k in range(3000)])},
+                       '1 to 720'),
+    'not a mapping': (['I'], 'balancing.sites', 'mapping'),
+}
+
+
+@pytest.mark.parametrize('case', sorted(BAD_SITES))
+def test_bad_sites_are_named(case):
+    sites, *needles = BAD_SITES[case]
+    with pytest.raises(LayoutError) as error:
+        parse_layout(with_sites(sites))
+    message = str(error.value)
+    assert '\n' not in message and len(message) < 300
+    for needle in needles:
+        assert needle in message, (needle, message)
+
+
+def test_sites_need_two_planes():
+    layout = with_sites(GOOD)
+    layout['supports'] = [{'name': 'front', 'z': 0.0}]
+    del layout['balancing']['planes']
+    with pytest.raises(LayoutError, match='two correction planes'):
+        parse_layout(layout)
+    layout['balancing']['planes'] = [-0.1, 0.1]          # given planes: fine
+    assert len(parse_layout(layout).balancing.sites) == 2
+
+
+def test_bad_sites_on_the_command_line(tmp_path):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump(with_sites({'I': dict(GOOD['I'], stack=0)})))
+    done = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'solve', str(path),
+                           '--omega', '20'], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ''
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'balancing.sites.I.stack' in lines[0]
