@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from cvc_balance.cli.arguments import EXIT_BAD_INPUT, EXIT_FAILURE
-from cvc_balance.physics.layout import LayoutError, short
+from cvc_balance.physics.layout import LayoutError, one_line
 
 COMMAND_MODULES = ('solve', 'design', 'bags', 'identify', 'field', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
@@ -24,23 +24,33 @@ def main(argv=None):
     try:
         return args.run(args)
     except (LayoutError, ValueError, OSError) as error:
-        print(f'cvc-balance: error: {short(str(error), 2000)}', file=sys.stderr)
+        print(f'cvc-balance: error: {one_line(error, 2000)}', file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print('cvc-balance: interrupted', file=sys.stderr)
         return 130
     except Exception as error:  # a bug, not the input's fault: one line, never a traceback
-        print(f'cvc-balance: internal error: {type(error).__name__}: {short(str(error), 300)} '
+        print(f'cvc-balance: internal error: {type(error).__name__}: {one_line(error, 300)} '
               '(please report it with the command that gave it)', file=sys.stderr)
         return EXIT_FAILURE
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, with a bad command line said in one line (no usage block) and exit code 2."""
+
+    def error(self, message):
+        """Print ``message`` on one line and exit with EXIT_BAD_INPUT."""
+        self.exit(EXIT_BAD_INPUT, f'{self.prog}: error: {one_line(message, 500)} '
+                  '(see --help)\n')
+
+
 def parser():
     """Return the argument parser of every command."""
-    top = argparse.ArgumentParser(
+    top = Parser(
         prog='cvc-balance', description='Bearing loads, drive torque and unbalance of a '
         'rotor from its component layout (cylindrical vector components).')
-    commands = top.add_subparsers(dest='command', required=True, metavar='COMMAND')
+    commands = top.add_subparsers(dest='command', required=True, metavar='COMMAND',
+                                  parser_class=Parser)
     for name in COMMAND_MODULES:
         importlib.import_module(f'cvc_balance.cli.{name}').register(commands)
     return top

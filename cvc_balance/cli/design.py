@@ -10,7 +10,7 @@ prints them); angles in degrees where people type or read them.
 import json
 import math
 
-from cvc_balance.cli.arguments import EXIT_BAD_INPUT, finite
+from cvc_balance.cli.arguments import finite
 from cvc_balance.design.parameters import design_parameter, parse_parameter, PARAMETERS, UNITS
 from cvc_balance.design.tolerances import describe, load_tolerances, typical_tolerances
 from cvc_balance.physics.engine import RotorModel
@@ -108,12 +108,8 @@ def register(commands):
 
 
 def _layout_argument(parser):
-    """Add the LAYOUT argument, and make the parser's own errors one line (no usage block)."""
+    """Add the LAYOUT argument."""
     parser.add_argument('layout', metavar='LAYOUT', help='layout file (YAML or JSON)')
-
-    def error(message):
-        parser.exit(EXIT_BAD_INPUT, f'{parser.prog}: error: {message} (see --help)\n')
-    parser.error = error
 
 
 def _speed(args, layout):

@@ -511,6 +511,12 @@ def _kind(value):
     return type(value).__name__
 
 
+def one_line(message, limit=300):
+    """Return ``message`` (any object's str) on one line, cut to about ``limit`` characters."""
+    text = ' '.join(str(message).split())
+    return text if len(text) <= limit else text[:limit] + f'... ({len(text)} characters)'
+
+
 def short(value, limit=40):
     """
     Return ``value`` for an error message: one line, at most about ``limit`` characters.
