@@ -34,7 +34,7 @@ from cvc_balance.field.order_tracking import DEFAULT_TOLERANCE
 from cvc_balance.messages import topics
 from cvc_balance.physics import iso21940
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.motion import accepted_samples
+from cvc_balance.physics.motion import accepted_samples, MAX_STAMP_JUMP
 
 COMPONENTS = ('force_x', 'force_y', 'force_z', 'torque_x', 'torque_y', 'torque_z')
 SPEED_MISMATCH = 0.02
@@ -97,7 +97,7 @@ def read_run(bag_path, sensors=None, speed=None, tolerance=DEFAULT_TOLERANCE,
     bag = open_bag(bag_path)
     motion, layout_messages = read_inputs(bag, joint_name)
     stamp, log = motion.stamp * 1e-9, motion.log_time * 1e-9
-    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed)
+    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP)
     stamp, log = stamp[accepted], log[accepted]
     angle, omega = np.unwrap(motion.angle[accepted]), motion.omega[accepted]
     if len(stamp) < 2:

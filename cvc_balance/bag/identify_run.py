@@ -20,7 +20,7 @@ from cvc_balance.identify import (CellReadings, fit, identified_unbalance, layou
                                   Motion, residual)
 from cvc_balance.messages import topics
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.motion import acceleration_series, accepted_samples
+from cvc_balance.physics.motion import accepted_motion
 
 
 @dataclass
@@ -66,9 +66,8 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
     motion, layout_messages = read_inputs(bag, joint_name, names)
     events, problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
-    accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
+    accepted, alpha = accepted_motion(t, motion.angle, motion.omega, max_speed, time_constant)
     t, angle, omega = t[accepted], motion.angle[accepted], motion.omega[accepted]
-    alpha = acceleration_series(t, omega, time_constant)
     log_time = motion.log_time[accepted]
     segments = []
     bounds = [e[0] for e in events[1:]] + [np.iinfo(np.int64).max]

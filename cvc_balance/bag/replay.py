@@ -24,7 +24,7 @@ from cvc_balance.physics.frames import g_mm, ROTOR_FRAME, STATOR_FRAME, wrap_ang
 from cvc_balance.physics.layout import LayoutError
 from cvc_balance.physics.layout_file import layout_from_text
 from cvc_balance.physics.model_choice import choose_model, Envelope
-from cvc_balance.physics.motion import acceleration_series, accepted_samples
+from cvc_balance.physics.motion import accepted_motion, MAX_STAMP_JUMP
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
@@ -129,7 +129,7 @@ def layout_events(bag, layout_messages, layout_file=None):
 
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
            time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
-           observer=None, tolerance=None, names=None):
+           observer=None, tolerance=None, names=None, max_stamp_jump=MAX_STAMP_JUMP):
     """
     Replay ``bag_path``; write outputs to ``output`` (if given); return a ReplaySummary.
 
@@ -156,20 +156,20 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
                                   f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
     events, summary.problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
-    accepted = accepted_samples(t, motion.angle, motion.omega, max_speed)
+    accepted, accepted_alpha = accepted_motion(t, motion.angle, motion.omega, max_speed,
+                                               time_constant, max_stamp_jump)
     summary.rejected = motion.rejected + int((~accepted).sum())
     if (~accepted).any() and len(summary.reasons) < 5:
-        summary.reasons.append('motion samples not finite, beyond max_speed or not after the '
-                               'previous stamp')
+        summary.reasons.append('motion samples not finite, beyond max_speed, not after the '
+                               'previous stamp or jumping more than max_stamp_jump')
     first_layout = events[0][0]
     in_time = motion.log_time >= first_layout
     summary.dropped = int((accepted & ~in_time).sum())
     use = accepted & in_time
     stamp, log_time, angle, omega = _where(use, motion.stamp, motion.log_time, motion.angle,
                                            motion.omega)
-    # alpha runs over every accepted sample, as in the node (also those before a layout).
-    alpha, = _where(in_time[accepted], acceleration_series(
-        *_where(accepted, t, motion.omega), time_constant))
+    # alpha runs over every accepted sample (also those before a layout).
+    alpha, = _where(in_time[accepted], accepted_alpha)
     summary.accepted = int(use.sum())
     writer = open_writer(output, compression=compression,
                          level=LEVELS.get(compression)) if output else None

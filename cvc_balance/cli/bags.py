@@ -7,9 +7,10 @@ Heavy modules (rclpy, rerun) are imported by the command that needs them only.
 import argparse
 import sys
 
-from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, finite, input_topics,
-                                       OUTPUT_BAG_HELP, tolerance)
+from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, finite, input_topics,
+                                       OUTPUT_BAG_HELP, positive, tolerance)
 from cvc_balance.physics.model_choice import Tolerance
+from cvc_balance.physics.motion import MAX_STAMP_JUMP
 
 
 def register(commands):
@@ -31,10 +32,13 @@ def register(commands):
                         'run ("what if") instead of the bag\'s')
     add_input_topics(replay)
     replay.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
-    replay.add_argument('--alpha-time-constant', type=finite, default=0.1, metavar='S',
+    replay.add_argument('--alpha-time-constant', type=positive, default=0.1, metavar='S',
                         help='as the node\'s parameter (s)')
-    replay.add_argument('--max-speed', type=finite, default=1000.0, metavar='W',
+    replay.add_argument('--max-speed', type=positive, default=1000.0, metavar='W',
                         help='as the node\'s parameter (rad/s)')
+    replay.add_argument('--max-stamp-jump', type=positive, default=MAX_STAMP_JUMP, metavar='S',
+                        help='as the node\'s parameter (s): a sample stamped more than S from '
+                        'the previous is rejected unless the next one agrees')
     replay.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
@@ -51,7 +55,7 @@ def register(commands):
                                'for the rerun viewer: the turning gantry, loads, unbalance.')
     view.add_argument('bag', metavar='BAG', help=BAG_HELP)
     view.add_argument('-o', '--output', required=True, metavar='RUN.rrd')
-    view.add_argument('--every', type=int, default=10, metavar='N',
+    view.add_argument('--every', type=count, default=10, metavar='N',
                       help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
     add_input_topics(view)
@@ -66,13 +70,13 @@ def register(commands):
                                'their timing (to drive a running balance_monitor) and record '
                                'the node\'s outputs.')
     play.add_argument('bag', metavar='BAG', help=BAG_HELP)
-    play.add_argument('--rate', type=finite, default=1.0, metavar='X',
+    play.add_argument('--rate', type=positive, default=1.0, metavar='X',
                       help='playback speed factor (default 1)')
     play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs (and '
                       '/diagnostics) to this bag: a .mcap file, or a rosbag2 directory for '
                       'any other name')
     add_input_topics(play)
-    play.add_argument('--wait', type=finite, default=20.0, metavar='S',
+    play.add_argument('--wait', type=positive, default=20.0, metavar='S',
                       help='give up (exit code 1) when no node subscribes to the motion topic, '
                       "or the recorder sees none of the node's outputs, within S seconds "
                       '(default 20)')
@@ -85,7 +89,7 @@ def register(commands):
     record.add_argument('topics', nargs='*', metavar='TOPIC',
                         help='topics (patterns with *); default: inputs, outputs, diagnostics')
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
-    record.add_argument('--chunk-kib', type=int, default=1024, metavar='K',
+    record.add_argument('--chunk-kib', type=count, default=1024, metavar='K',
                         help='chunk size; a killed recorder loses at most one chunk')
     record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
                         help='print "ready" once this topic\'s publisher is matched')
@@ -112,7 +116,7 @@ def _replay(args):
                      '' if args.compression == 'none' else args.compression,
                      ReplayProgress() if show else None, observer=logger,
                      tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
-                     names=input_topics(args))
+                     names=input_topics(args), max_stamp_jump=args.max_stamp_jump)
     if logger:
         logger.finish()
     print(format_summary(summary))

@@ -48,16 +48,24 @@ class RotorUnbalance:
     identifiable: bool = True
 
 
-def _aggregates(model, static, products):
-    return SimpleNamespace(mass=model.mass, s_z=model.s_z, s_x=static.real, s_y=static.imag,
-                           p_xz=products.real, p_yz=products.imag)
+def rotor_with(model, static, products):
+    """
+    Return ``model`` (a RotorModel) with its S and P replaced: the rotor the cells measured.
+
+    A value with the attributes the unbalance and the verdict read (``layout``, ``mass``,
+    ``s_x``, ``s_y``, ``s_z``, ``p_xz``, ``p_yz``): load cells cannot see the mass and
+    the axial centre of mass, which stay the layout's.
+    """
+    return SimpleNamespace(layout=model.layout, mass=model.mass, s_z=model.s_z,
+                           s_x=static.real, s_y=static.imag, p_xz=products.real,
+                           p_yz=products.imag)
 
 
 def _weights(model, quantity):
     """Complex weights (w_S, w_P) of a quantity linear in (S, P), from unit aggregates."""
-    unit_s = quantity(_aggregates(model, 1.0 + 0j, 0j))
-    unit_p = quantity(_aggregates(model, 0j, 1.0 + 0j))
-    zero = quantity(_aggregates(model, 0j, 0j))
+    unit_s = quantity(rotor_with(model, 1.0 + 0j, 0j))
+    unit_p = quantity(rotor_with(model, 0j, 1.0 + 0j))
+    zero = quantity(rotor_with(model, 0j, 0j))
     return tuple(complex(*unit) - complex(*zero) for unit in (unit_s, unit_p))
 
 
@@ -81,7 +89,7 @@ def unbalance_from(model, static, products, ci95_of=None, identifiable=True):
     ``model``: the layout's RotorModel (mass, S_z, planes); ``ci95_of`` maps complex
     weights (w_S, w_P) to a 95 % radius (None: exact values, radius 0).
     """
-    values = _aggregates(model, static, products)
+    values = rotor_with(model, static, products)
 
     def vector(quantity):
         weights = _weights(model, quantity)

@@ -12,6 +12,7 @@ BEARING_LOAD = 'bearing_load'
 UNBALANCE = 'unbalance'
 DRIVE_TORQUE = 'drive_torque'
 DIAGNOSTICS = '/diagnostics'
+MEASURED_LOAD = 'measured_load'
 IDENTIFIED_UNBALANCE = 'identified_unbalance'
 UNBALANCE_RESIDUAL = 'unbalance_residual'
 
@@ -32,4 +33,4 @@ def support_load(name):
 
 def measured_load(name):
     """Return the topic of a support's load cell (WrenchStamped, stator frame, N)."""
-    return f'supports/{name}/measured_load'
+    return f'supports/{name}/{MEASURED_LOAD}'

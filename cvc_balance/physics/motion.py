@@ -94,6 +94,10 @@ def sample_problem(time, last_time, angle, omega, max_speed):
     return None
 
 
+MAX_STAMP_JUMP = 1.0
+"""s: the largest plausible step between two motion samples' stamps (the node's default)."""
+
+
 class StampGate:
     """
     Stamps of a motion stream: in order, and no implausible jump lets one sample poison it.
@@ -222,3 +226,22 @@ def gate_samples(time, angle, omega, max_speed, max_jump=math.inf):
         accepted[index] = gate.check(float(time[index])) is None
         restarted[index] = gate.restarted
     return accepted, restarted
+
+
+def accepted_motion(time, angle, omega, max_speed, time_constant, max_jump=MAX_STAMP_JUMP):
+    """
+    Return (accepted, alpha): the samples the live node takes, and its alpha for each of them.
+
+    ``accepted`` is a boolean array over the samples (:func:`gate_samples`); ``alpha``
+    (rad/s^2) the :class:`AccelerationEstimator` of the accepted ones, started afresh
+    where their time line restarted, as the node resets it.
+    """
+    import numpy as np
+
+    accepted, restarted = gate_samples(time, angle, omega, max_speed, max_jump)
+    t, w = np.asarray(time, float)[accepted], np.asarray(omega, float)[accepted]
+    bounds = [0, *np.flatnonzero(restarted[accepted]).tolist(), len(t)]
+    alpha = np.zeros(len(t))
+    for start, stop in zip(bounds[:-1], bounds[1:]):
+        alpha[start:stop] = acceleration_series(t[start:stop], w[start:stop], time_constant)
+    return accepted, alpha

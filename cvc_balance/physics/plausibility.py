@@ -12,6 +12,8 @@ them with the layout.
 
 import math
 
+import numpy as np
+
 from cvc_balance.physics.frames import STANDARD_GRAVITY
 
 LONGEST = 100.0
@@ -42,7 +44,14 @@ def layout_warnings(layout):
     neither 0 nor Earth's.
     """
     warnings = []
-    for c in layout.components:
+    components = layout.components
+    mass, radius, angle, z = layout.placement
+    # Checked as arrays, then described one by one: a layout may have 10^6 components.
+    suspects = (np.abs(angle) > 2.0 * math.pi) | (np.abs(radius) >= LONGEST) \
+        | (np.abs(z) >= LONGEST)
+    shaped = [k for k, c in enumerate(components) if c.shape is not None]
+    for k in sorted(set(np.flatnonzero(suspects).tolist()) | set(shaped)):
+        c = components[k]
         where = f"component '{c.name}'"
         if abs(c.angle) > 2.0 * math.pi:
             warnings.append(
@@ -53,7 +62,7 @@ def layout_warnings(layout):
                 warnings.append(f'{where}: field {field} {value:g} m is {LONGEST:g} m or more: '
                                 'millimetres for metres? (lengths are in m)')
         warnings += _density(c, where)
-    warnings += _mass_outliers([c for c in layout.components if _volume(c.shape) is None])
+    warnings += _mass_outliers([c for c in components if _volume(c.shape) is None])
     for s in layout.supports:
         if abs(s.z) >= LONGEST:
             warnings.append(f"support '{s.name}': field z {s.z:g} m is {LONGEST:g} m or more: "
@@ -121,16 +130,20 @@ def _mass_outliers(components):
     """Warnings for point masses above MASS_RATIO times the median of the others'."""
     if len(components) <= MASS_PEERS:
         return []
-    masses = sorted(c.mass for c in components)
+    masses = np.array([c.mass for c in components])
+    ordered = np.sort(masses)
+    last = len(ordered) - 1
+    where = np.searchsorted(ordered, masses)       # a copy of each component's own mass
+
+    def of_others(j):
+        """Element j of the sorted masses without the component's own (one copy)."""
+        return np.where(j < where, ordered[min(j, last)], ordered[min(j + 1, last)])
+    middle = last // 2                              # the others are `last` masses
+    median = of_others(middle) if last % 2 else 0.5 * (of_others(middle - 1) + of_others(middle))
     warnings = []
-    for c in components:
-        others = list(masses)
-        others.remove(c.mass)
-        middle = len(others) // 2
-        median = others[middle] if len(others) % 2 else \
-            0.5 * (others[middle - 1] + others[middle])
-        if c.mass > MASS_RATIO * median:
-            warnings.append(f"component '{c.name}': mass {c.mass:g} kg is "
-                            f'{c.mass / median:.0f} times the median of the others '
-                            f'({median:g} kg): grams for kilograms? (masses are in kg)')
+    for k in np.flatnonzero(masses > MASS_RATIO * median).tolist():
+        c, m = components[k], float(median[k])
+        warnings.append(f"component '{c.name}': mass {c.mass:g} kg is "
+                        f'{c.mass / m:.0f} times the median of the others '
+                        f'({m:g} kg): grams for kilograms? (masses are in kg)')
     return warnings

@@ -22,6 +22,8 @@ of that level are logged once each (WARN and STALE as warnings, ERROR as an
 error, back to OK as info).
 """
 
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 import math
 import sys
 from time import monotonic
@@ -37,16 +39,18 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
 from cvc_balance.messages import topics
-from cvc_balance.messages.cdr import WrenchStampedEncoder
+from cvc_balance.messages.cdr import string_message, WrenchStampedEncoder
 from cvc_balance.physics import assessment
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
-from cvc_balance.physics.layout import LayoutError
-from cvc_balance.physics.layout_file import layout_from_text, load_layout
-from cvc_balance.physics.motion import AccelerationEstimator, AngleIntegrator, sample_problem
+from cvc_balance.physics.layout import LayoutError, one_line
+from cvc_balance.physics.layout_file import layout_from_text, MAX_TEXT_BYTES
+from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
+                                        MAX_STAMP_JUMP, sample_problem, StampGate)
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
+from cvc_balance.ros.load_cells import LoadCells
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import BagRecorder
 
@@ -73,6 +77,14 @@ PARAMETERS = (
      'fraction of the grade (ERROR beyond the grade)', (0.01, 1.0)),
     ('max_speed', 1000.0, 'absolute speeds above this (rad/s) are rejected as absurd',
      (1e-3, 1e5)),
+    ('max_stamp_jump', MAX_STAMP_JUMP, 'a motion sample stamped more than this (s) from '
+     'the previous one is rejected, and a new time line followed only when the next sample '
+     'agrees',
+     (1e-3, 1e6)),
+    ('identify_window_revs', 10, 'revolutions over which the load cells fit the measured '
+     'unbalance (supports/<name>/measured_load)', (1, 100000)),
+    ('residual_warn', 0.5, 'WARN when a plane\'s residual (measured - layout) exceeds this '
+     'fraction of its permissible unbalance (and its 95 % radius)', (0.01, 100.0)),
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
     ('stale_after', 2.0, '/diagnostics says STALE when no motion sample was accepted for '
      'this long (s)', (0.01, 3600.0)),
@@ -88,19 +100,49 @@ PARAMETERS = (
 )
 
 
-class ActiveLayout:
-    """A layout in force: its engine model and what the outputs need of it, made once."""
+class PreparedLayout:
+    """
+    A layout parsed and aggregated, ready to be put in force: all its costly work, done once.
 
-    def __init__(self, layout, node):
-        """Aggregate ``layout`` and make the per-support publishers (raises on bad names)."""
-        self.layout = layout
-        self.model = RotorModel.from_layout(layout)
-        self.digest = layout.digest()
+    Made on the node's layout worker thread (:func:`prepare_layout`), so that parsing and
+    aggregating 10^6 components does not hold up the input callbacks.
+    """
+
+    def __init__(self, text, source):
+        """Parse ``text`` (YAML/JSON) and aggregate it; raises LayoutError."""
+        self.text, self.source = text, source
+        self.layout = layout_from_text(text, source=source)
+        self.model = RotorModel.from_layout(self.layout)
+        self.digest = self.layout.digest()
         self.static = static_unbalance(self.model)
         self.couple = couple_unbalance(self.model)
-        self.warnings = layout_warnings(layout)
+        self.warnings = layout_warnings(self.layout)
+
+
+def prepare_layout(text, source):
+    """Return a PreparedLayout, or the one-line reason it cannot be used (any failure)."""
+    try:
+        return PreparedLayout(text, source)
+    except LayoutError as error:
+        return str(error)
+    except Exception as error:     # a bug must not take the node down: the layout is refused
+        return f'{source}: {type(error).__name__}: {one_line(error)}'
+
+
+class ActiveLayout:
+    """A layout in force: its prepared values and the per-support publishers and cells."""
+
+    def __init__(self, prepared, node):
+        """Make the per-support publishers and the load cells' subscriptions."""
+        self.text, self.source, self.layout = prepared.text, prepared.source, prepared.layout
+        self.model, self.digest, self.warnings = prepared.model, prepared.digest, \
+            prepared.warnings
+        self.static, self.couple = prepared.static, prepared.couple
         self.supports = tuple(
-            (s.name, node.publisher(topics.support_load(s.name))) for s in layout.supports)
+            (s.name, node.publisher(topics.support_load(s.name)))
+            for s in self.layout.supports)
+        self.cells = LoadCells(node, self.model, node.params['identify_window_revs'],
+                               input_qos(node.params['input_depth']), node.emit_rotor)
 
 
 class BalanceMonitor(Node):
@@ -132,15 +174,15 @@ class BalanceMonitor(Node):
         self._reported_level = None
         self._peak_load = 0.0
         self._last_rejection = ''
+        self._period_rejected = 0
+        self._internal_errors = 0
+        self._reported_measured = None
         self._layout_error = ''
-        if self.params['layout_file']:
-            self._apply_layout_file(self.params['layout_file'])
-        sensor_qos = input_qos(self.params['input_depth'])
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_states,
-                                 sensor_qos)
-        self.create_subscription(Float64, topics.SPEED, self._on_speed, sensor_qos)
-        self.create_subscription(String, topics.LAYOUT, self._on_layout, LAYOUT_QOS)
-        self.create_timer(self.params['diagnostics_period'], self._publish_diagnostics)
+        self._gate = StampGate(self.params['max_stamp_jump'])
+        # Layouts are parsed and aggregated on their own thread, put in force here, in order.
+        self._layout_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='layout')
+        self._preparing = deque()
+        self._layout_poll = None
         self._rerun = None
         if self.params['rerun']:
             from cvc_balance.view.rerun_log import open_recording, RunLogger
@@ -148,8 +190,6 @@ class BalanceMonitor(Node):
                                                    self.params['rerun_target'],
                                                    name=self.get_fully_qualified_name()),
                                     every=self.params['rerun_every'])
-            if self._active is not None:
-                self._rerun.layout(None, self._active.model)   # at the first sample
         self._recorder = None
         self._record = {}
         if self.params['record_path']:
@@ -157,9 +197,19 @@ class BalanceMonitor(Node):
             # they are published (no second trip through DDS).
             self._recorder = BagRecorder(self, self.params['record_path'],
                                          (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT,
-                                          topics.DIAGNOSTICS))
+                                          topics.measured_load('*'), topics.DIAGNOSTICS))
             for topic in topics.OUTPUTS:
                 self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
+        if self.params['layout_file']:
+            self._apply_layout_file(self.params['layout_file'])
+        sensor_qos = input_qos(self.params['input_depth'])
+        self.create_subscription(JointState, topics.JOINT_STATES,
+                                 self._guarded(self._on_joint_states), sensor_qos)
+        self.create_subscription(Float64, topics.SPEED, self._guarded(self._on_speed), sensor_qos)
+        self.create_subscription(String, topics.LAYOUT, self._guarded(self._on_layout),
+                                 LAYOUT_QOS)
+        self.create_timer(self.params['diagnostics_period'],
+                          self._guarded(self._publish_diagnostics))
 
     def destroy_node(self):
         """Finalise the recording, if any, then destroy the node."""
@@ -172,7 +222,35 @@ class BalanceMonitor(Node):
         if self._rerun is not None:
             self._rerun.finish()
             self._rerun = None
+        self._layout_worker.shutdown(wait=False, cancel_futures=True)
         return super().destroy_node()
+
+    def _guarded(self, callback):
+        """
+        Wrap a callback so that no failure escapes it: the node must never die of an input.
+
+        Layouts and messages are checked where they come in; this is for a bug that the
+        checks missed: counted, logged (once a second) and shown in the diagnostics.
+        """
+        def guarded(*args):
+            try:
+                callback(*args)
+            except Exception as error:      # any: the previous good state stays in force
+                self._internal_errors += 1
+                self._last_rejection = (f'internal error in {callback.__name__}: '
+                                        f'{type(error).__name__}: {one_line(error, 200)}')
+                self.get_logger().error(self._last_rejection,
+                                        throttle_duration_sec=THROTTLE_S)
+        return guarded
+
+    def emit_rotor(self, topic, sec, nanosec, force, torque):
+        """Publish (and record) a rotor-frame wrench on ``topic``, made by the node."""
+        data = self._rotor_cdr.encode(sec, nanosec, force, torque)
+        self.publisher(topic).publish(data)
+        if self._recorder is not None:
+            if topic not in self._record:
+                self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
+            self._record[topic](self.get_clock().now().nanoseconds, data)
 
     def publisher(self, topic):
         """Return the WrenchStamped publisher of ``topic``, made on first use."""
@@ -198,7 +276,7 @@ class BalanceMonitor(Node):
         omega = msg.data
         sec, nanosec = divmod(self.get_clock().now().nanoseconds, 1_000_000_000)
         time = sec + nanosec * 1e-9
-        problem = sample_problem(time, self._last_time, 0.0, omega, self.params['max_speed'])
+        problem = sample_problem(time, None, 0.0, omega, self.params['max_speed'])
         if problem:
             self._reject(f'speed: {problem}')
             return
@@ -206,6 +284,8 @@ class BalanceMonitor(Node):
 
     def _process(self, sec, nanosec, angle, omega):
         """Compute and publish the outputs of one motion sample (plain floats)."""
+        if self._preparing:
+            self._take_prepared()       # a new layout takes effect between two samples
         active = self._active
         if active is None:
             self._counts['dropped'] += 1
@@ -213,10 +293,15 @@ class BalanceMonitor(Node):
                                       throttle_duration_sec=THROTTLE_S)
             return
         time = sec + nanosec * 1e-9
-        problem = sample_problem(time, self._last_time, angle, omega, self.params['max_speed'])
+        problem = sample_problem(time, None, angle, omega, self.params['max_speed']) or \
+            self._gate.check(time)
         if problem:
             self._reject(f'motion sample: {problem}')
             return
+        if self._gate.restarted:         # a new time line: the old slope means nothing
+            self._alpha.reset()
+            self.get_logger().warning(f'motion samples moved to a new time line at {time:.9f} '
+                                      's (confirmed by two samples)')
         self._last_time = time
         alpha = self._alpha.update(time, omega)
         result = sample_loads(active.model, angle, omega, alpha)
@@ -243,6 +328,7 @@ class BalanceMonitor(Node):
             self._record_outputs(bearing, supports, unbalance, torque)
         if self._rerun is not None:
             self._rerun.sample(sec * 1_000_000_000 + nanosec, angle, omega, alpha, result)
+        active.cells.motion(sec, nanosec, angle, omega, alpha)
         self._omega = omega
         speed = omega if omega >= 0.0 else -omega
         if speed > self._top_speed:
@@ -265,33 +351,57 @@ class BalanceMonitor(Node):
 
     def _reject(self, reason):
         self._counts['rejected'] += 1
+        self._period_rejected += 1
         self._last_rejection = reason
         self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=THROTTLE_S)
 
     # -- layout ----------------------------------------------------------------------
 
     def _on_layout(self, msg):
-        try:
-            layout = layout_from_text(msg.data, source='layout topic')
-        except LayoutError as error:
-            self._refuse_layout(str(error))
-            return
-        self._apply(layout, 'layout topic')
+        """Hand the layout text to the worker thread; it is put in force when ready."""
+        self._preparing.append(self._layout_worker.submit(prepare_layout, msg.data,
+                                                          'layout topic'))
+        if self._layout_poll is None:    # without samples flowing, a timer takes it
+            self._layout_poll = self.create_timer(0.01, self._guarded(self._take_prepared))
+
+    def _take_prepared(self):
+        """Put in force (or refuse) the layouts whose preparation is done, in arrival order."""
+        while self._preparing and self._preparing[0].done():
+            prepared = self._preparing.popleft().result()
+            if isinstance(prepared, str):
+                self._refuse_layout(prepared)
+            else:
+                self._apply(prepared)
+        if not self._preparing and self._layout_poll is not None:
+            self.destroy_timer(self._layout_poll)
+            self._layout_poll = None
 
     def _apply_layout_file(self, path):
+        """Put the layout_file in force at start (before any sample: no need to wait)."""
         try:
-            layout = load_layout(path)
-        except LayoutError as error:
-            self._refuse_layout(str(error))
+            with open(path, 'rb') as stream:
+                text = stream.read(MAX_TEXT_BYTES + 1).decode('utf-8', errors='replace')
+        except OSError as error:
+            self._refuse_layout(f'{path}: cannot read layout file: {error.strerror}')
             return
-        self._apply(layout, path)
+        prepared = prepare_layout(text, str(path))
+        if isinstance(prepared, str):
+            self._refuse_layout(prepared)
+        else:
+            self._apply(prepared)
+            if self._recorder is not None:    # the bag carries the layout in force
+                self._recorder.write(topics.LAYOUT, self.get_clock().now().nanoseconds,
+                                     string_message(text))
 
-    def _apply(self, layout, source):
+    def _apply(self, prepared):
+        source, layout = prepared.source, prepared.layout
         try:
-            active = ActiveLayout(layout, self)
-        except Exception as error:  # e.g. a support name that is no valid topic name
-            self._refuse_layout(f'{source}: {error}')
+            active = ActiveLayout(prepared, self)
+        except Exception as error:  # e.g. rclpy refusing a topic or subscription
+            self._refuse_layout(f'{source}: {type(error).__name__}: {one_line(error)}')
             return
+        if self._active is not None:
+            self._active.cells.close()
         self._active = active  # one reference swap: takes effect between two samples
         self._top_speed = 0.0
         if self._last_input is None:    # STALE counts from the first layout, not the start
@@ -326,16 +436,26 @@ class BalanceMonitor(Node):
                   'dropped': self._counts['dropped'],
                   'input rate [Hz]': self._period_accepted / max(now - self._period_start, 1e-9),
                   'peak bearing load [N]': math.sqrt(self._peak_load),
+                  'rejected in the last period': self._period_rejected,
+                  'internal errors': self._internal_errors,
                   'last rejected input': self._last_rejection,
                   'last rejected layout': self._layout_error}
+        period, rejected = now - self._period_start, self._period_rejected
         self._period_accepted, self._peak_load, self._period_start = 0, 0.0, now
+        self._period_rejected = 0
         active = self._active
+        statuses = [status]
         if active is None:
             level, message = DiagnosticStatus.WARN, 'no layout (waiting for one on the ' \
                 f'{topics.LAYOUT} topic)'
         else:
             level, message, balance = self._judge(active)
             values.update(balance)
+            if rejected:        # the verdict stands, but the input is not all well
+                level = max(level, DiagnosticStatus.WARN)
+                message += (f'; {rejected} motion samples rejected in the last {period:.2g} s '
+                            f'(last: {self._last_rejection})')
+            statuses += self._measured_status(active)
             quiet = now - (self._last_input if self._last_input is not None else self._started)
             values['last motion sample [s ago]'] = quiet if self._last_input is not None else ''
             if quiet > self.params['stale_after']:
@@ -348,10 +468,29 @@ class BalanceMonitor(Node):
             message += f'; last layout rejected: {self._layout_error}'
         status.level, status.message = level, message
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
-        array = DiagnosticArray(status=[status])
+        array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics_pub.publish(array)
         self._log_transition(level, message)
+
+    def _measured_status(self, active):
+        """Return the load cells' status (a second DiagnosticStatus) once cells have read."""
+        grade = self.params['balance_grade'] or active.layout.balancing.grade
+        diagnosis = active.cells.diagnose(self._top_speed, grade, self.params['warn_fraction'],
+                                          self.params['residual_warn'])
+        if diagnosis is None:
+            return []
+        level, message, values = diagnosis
+        if level != self._reported_measured:    # a change of what the cells say: once
+            self._reported_measured = level
+            logger = self.get_logger()
+            log = {assessment.ERROR: logger.error, assessment.WARN: logger.warning}
+            log.get(level, logger.info)(f'load cells {level}: {message}')
+        status = DiagnosticStatus(name='balance_monitor: measured unbalance',
+                                  hardware_id=self.get_fully_qualified_name(),
+                                  level=LEVELS[level], message=message)
+        status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
+        return [status]
 
     def _log_transition(self, level, message):
         """Log a change of the diagnostics level, once (not every period)."""
@@ -421,6 +560,10 @@ class BalanceMonitor(Node):
                 descriptor.floating_point_range = [
                     FloatingPointRange(from_value=bounds[0], to_value=bounds[1])]
             values[name] = self.declare_parameter(name, default, descriptor).value
+            if name in ('joint_name', 'stator_frame', 'rotor_frame') and \
+                    not (isinstance(values[name], str) and values[name].strip()):
+                raise ValueError(f'parameter {name} must be a non-empty string, got '
+                                 f'{values[name]!r}')
         return values
 
 
@@ -474,7 +617,8 @@ def main(args=None):
         return 2
     try:
         node = BalanceMonitor()
-    except (ParameterException, ValueError) as error:   # ValueError: e.g. the rerun mode
+    # ValueError: e.g. the rerun mode, an empty joint_name; OSError: record_path's folder.
+    except (ParameterException, ValueError, OSError) as error:
         print(f'balance_monitor: error: {error}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2

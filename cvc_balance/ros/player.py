@@ -56,6 +56,17 @@ def output_topics(layout_texts):
     return names
 
 
+def cell_channels(bag):
+    """Return [(the node's topic, channel)] of the bag's load cells (supports/*/measured_load)."""
+    found = []
+    for channel in bag.channels.values():
+        parts = channel.topic.strip('/').split('/')
+        if len(parts) >= 3 and parts[-3] == 'supports' and parts[-1] == topics.MEASURED_LOAD \
+                and channel.msg_type == topics.WRENCH_TYPE:
+            found.append((topics.measured_load(parts[-2]), channel))
+    return found
+
+
 def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=print,
          names=None):
     """
@@ -82,11 +93,15 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
             (topics.LAYOUT, topics.STRING_TYPE, LAYOUT_QOS, channels.layout)):
         if channel is not None:
             inputs.append((topic, msg_type, qos, bag.messages(channel)))
+    for topic, channel in cell_channels(bag):       # load cells are inputs too
+        inputs.append((topic, topics.WRENCH_TYPE, input_qos(1000), bag.messages(channel)))
     for problem in bag.problems:
         say(f'play: {bag_path}: {problem}')
     layouts = [data for topic, _, _, messages in inputs if topic == topics.LAYOUT
                for _, data in messages]
     outputs = output_topics([read_string_message(data) for data in layouts])
+    if any(topic.endswith(topics.MEASURED_LOAD) for topic, *_ in inputs):
+        outputs += [topics.IDENTIFIED_UNBALANCE, topics.UNBALANCE_RESIDUAL]
     rclpy.init()
     node = rclpy.create_node('cvc_balance_player')
     verdicts = VerdictLog(node)

@@ -19,7 +19,8 @@ from cvc_balance.messages import topics
 from cvc_balance.ros.executor import spin
 
 DEFAULT_TOPICS = (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT, *topics.OUTPUTS,
-                  topics.support_load('*'), topics.DIAGNOSTICS)
+                  topics.support_load('*'), topics.measured_load('*'),
+                  topics.IDENTIFIED_UNBALANCE, topics.UNBALANCE_RESIDUAL, topics.DIAGNOSTICS)
 KNOWN_TYPES = {topics.JOINT_STATES: topics.JOINT_STATE_TYPE,
                topics.SPEED: topics.FLOAT64_TYPE, topics.LAYOUT: topics.STRING_TYPE,
                topics.DIAGNOSTICS.strip('/'): topics.DIAGNOSTIC_ARRAY_TYPE}
@@ -46,6 +47,7 @@ class BagRecorder:
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
+        self._channels = {}
         for topic in names:
             name = node.resolve_topic_name(topic) if '*' not in topic else topic
             if '*' in topic:
@@ -78,12 +80,24 @@ class BagRecorder:
             self.counts[name] += 1
         return write
 
+    def write(self, topic, log_time, data):
+        """
+        Write a message of a recorded topic that did not come through the subscription.
+
+        (The node's layout from its layout_file: it is in force, so the bag carries it.)
+        """
+        name = self.node.resolve_topic_name(topic)
+        self.writer.write(self._channels[name], log_time, data)
+        self.counts[name] += 1
+
     def _subscribe(self, name, msg_type):
         short = name.rsplit('/', 1)[-1]
         latched = short == topics.LAYOUT
-        best_effort = short in (topics.JOINT_STATES, topics.SPEED)
+        # Sensor streams are best effort: a reliable subscription would match none.
+        best_effort = short in (topics.JOINT_STATES, topics.SPEED, topics.MEASURED_LOAD)
         channel = self.writer.add_channel(name, msg_type, latched=latched,
                                           best_effort=best_effort)
+        self._channels[name] = channel
         qos = QoSProfile(depth=1000,
                          reliability=(ReliabilityPolicy.BEST_EFFORT if best_effort
                                       else ReliabilityPolicy.RELIABLE),
