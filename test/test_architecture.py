@@ -18,6 +18,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'cvc_balance'
 
 LAYERS = {
     'physics': 0,      # numpy only: layouts, engine, unbalance, ISO 21940, motion
+    'files': 0,        # output paths: checked, written under a temporary name (stdlib)
     'identify': 1,     # the unbalance from measured support loads (numpy)
     'field': 1,        # field balancing: 1x readings, influence coefficients, weight plans
     'messages': 1,     # topic names and types, CDR, ros2msg schemas (no rclpy)
@@ -33,6 +34,7 @@ LAYERS = {
 THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
     'physics': {'numpy', 'yaml'},
+    'files': set(),
     'identify': {'numpy'},
     'field': {'numpy', 'scipy'},
     'messages': {'ament_index_python'},

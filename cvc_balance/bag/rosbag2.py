@@ -350,20 +350,21 @@ class Rosbag2Writer:
         self.close()
 
 
-def _prepare_directory(directory):
+def writable_directory(directory):
+    """
+    Return the files to remove before ``directory`` is written as a bag, or raise BagError.
+
+    It may be absent, empty, or a rosbag2 bag holding only its own files (replaced).
+    """
+    directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise BagError(f'{directory}: exists and is not a directory; give a .mcap file or a '
                        'directory for the bag')
     if not directory.exists():
-        try:
-            directory.mkdir(parents=True)
-        except OSError as error:
-            raise BagError(f'{directory}: cannot make the bag directory: '
-                           f'{error.strerror}') from None
-        return
+        return []
     entries = {p.name for p in directory.iterdir()}
     if not entries:
-        return
+        return []
     if METADATA in entries:
         try:
             listed = {PurePath(n).name
@@ -371,11 +372,20 @@ def _prepare_directory(directory):
         except BagError:
             listed = None
         if listed is not None and entries <= listed | {METADATA}:
-            for name in entries:
-                (directory / name).unlink()
-            return
+            return [directory / name for name in entries]
     raise BagError(f'{directory}: exists and is not an empty directory or a rosbag2 bag; not '
                    'overwritten')
+
+
+def _prepare_directory(directory):
+    for old in writable_directory(directory):
+        old.unlink()
+    if not directory.exists():
+        try:
+            directory.mkdir(parents=True)
+        except OSError as error:
+            raise BagError(f'{directory}: cannot make the bag directory: '
+                           f'{error.strerror}') from None
 
 
 def metadata_yaml(file_name, topics, first, last):

@@ -1,10 +1,12 @@
 """Argument types and exit codes shared by the commands."""
 
 import argparse
+from contextlib import contextmanager, ExitStack
 import json
 import math
 import re
 
+from cvc_balance.files import check_output, replaced_when_done
 from cvc_balance.physics.layout import MAX_MAGNITUDE
 
 EXIT_FAILURE = 1
@@ -100,3 +102,26 @@ def print_json(data):
     something a JSON reader refuses.
     """
     print(json.dumps(data, indent=2, allow_nan=False))
+
+
+@contextmanager
+def staged_outputs(inputs, bags=(), **outputs):
+    """
+    Check a command's outputs before any work, and write them under temporary names.
+
+    ``outputs``: name -> path (None: not asked); ``inputs``: the paths the command
+    reads (an output may be none of them); ``bags``: the names of outputs that are bags
+    (a directory name means a rosbag2 directory, which must be empty or a bag).
+    Yields {name: temporary path or None}; each is moved onto its path when the block
+    ends without error. Raises OutputError (or BagError) first, before any work.
+    """
+    for name, path in outputs.items():
+        if path is None:
+            continue
+        check_output(path, inputs)
+        if name in bags and not str(path).endswith('.mcap'):
+            from cvc_balance.bag.rosbag2 import writable_directory
+            writable_directory(path)
+    with ExitStack() as stack:
+        yield {name: None if path is None else stack.enter_context(replaced_when_done(path))
+               for name, path in outputs.items()}

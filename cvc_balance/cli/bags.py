@@ -8,7 +8,8 @@ import argparse
 import sys
 
 from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, finite, input_topics,
-                                       OUTPUT_BAG_HELP, positive, tolerance)
+                                       OUTPUT_BAG_HELP, positive, staged_outputs, tolerance)
+from cvc_balance.files import check_output
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import MAX_STAMP_JUMP
 
@@ -100,8 +101,9 @@ def register(commands):
 
 def _simulate(args):
     from cvc_balance.bag.scenario import load_scenario, write_bag
-    scenario = load_scenario(args.scenario)
-    count = write_bag(scenario, args.output)
+    with staged_outputs([args.scenario], bags=('bag',), bag=args.output) as out:
+        scenario = load_scenario(args.scenario)
+        count = write_bag(scenario, out['bag'])
     print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
           f'{len(scenario.layouts)} layouts')
     return 0
@@ -110,15 +112,18 @@ def _simulate(args):
 def _replay(args):
     from cvc_balance.bag.replay import format_summary, replay
     show = args.progress if args.progress is not None else sys.stderr.isatty()
-    logger = _rerun_logger(args.rrd, args.bag) if args.rrd else None
-    summary = replay(args.bag, args.output, args.layout_file, args.joint_name,
-                     args.alpha_time_constant, args.max_speed,
-                     '' if args.compression == 'none' else args.compression,
-                     ReplayProgress() if show else None, observer=logger,
-                     tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
-                     names=input_topics(args), max_stamp_jump=args.max_stamp_jump)
-    if logger:
-        logger.finish()
+    with staged_outputs([args.bag, args.layout_file], bags=('bag',), bag=args.output,
+                        rrd=args.rrd) as out:
+        logger = _rerun_logger(out['rrd'], args.bag) if args.rrd else None
+        summary = replay(args.bag, out['bag'], args.layout_file, args.joint_name,
+                         args.alpha_time_constant, args.max_speed,
+                         '' if args.compression == 'none' else args.compression,
+                         ReplayProgress() if show else None, observer=logger,
+                         tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
+                         names=input_topics(args), max_stamp_jump=args.max_stamp_jump)
+        if logger:
+            logger.finish()
+    summary.output = args.output or ''
     print(format_summary(summary))
     return 0
 
@@ -148,30 +153,34 @@ def _rerun_logger(path, bag, every=10):
 
 def _view(args):
     from cvc_balance.bag.replay import replay
-    logger = _rerun_logger(args.output, args.bag, args.every)
-    summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
-                     names=input_topics(args))
-    logger.finish()
-    print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
-          f'{len(summary.segments)} layouts')
-    for problem in summary.problems:
-        print(f'  problem: {problem}')
-    if args.screenshot:
-        from cvc_balance.view.screenshot import render, ViewerError
-        try:
-            when = render(args.output, args.screenshot, args.at)
-        except ViewerError as error:
-            print(f'cvc-balance: error: {args.screenshot}: {error}', file=sys.stderr)
-            return 1
-        print(f'{args.screenshot}: the viewer at {when * 1e-9:.3f} s of the time line')
+    with staged_outputs([args.bag], rrd=args.output, png=args.screenshot) as out:
+        logger = _rerun_logger(out['rrd'], args.bag, args.every)
+        summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
+                         names=input_topics(args))
+        logger.finish()
+        print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
+              f'{len(summary.segments)} layouts')
+        for problem in summary.problems:
+            print(f'  problem: {problem}')
+        if args.screenshot:
+            from cvc_balance.view.screenshot import render, ViewerError
+            try:
+                when = render(out['rrd'], out['png'], args.at)
+            except ViewerError as error:
+                print(f'cvc-balance: error: {args.screenshot}: {error}', file=sys.stderr)
+                return 1
+            print(f'{args.screenshot}: the viewer at {when * 1e-9:.3f} s of the time line')
     return 0
 
 
 def _play(args):
     from cvc_balance.ros.player import play_main
+    if args.output:         # recorded live, in place (a killed run keeps its chunks)
+        check_output(args.output, [args.bag])
     return play_main(args)
 
 
 def _record(args):
     from cvc_balance.ros.recorder import record_main
+    check_output(args.output)    # recorded live, in place (see cvc-balance reindex)
     return record_main(args)

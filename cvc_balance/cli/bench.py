@@ -13,8 +13,10 @@ def register(commands):
 
 def run(args):
     """Run ``cvc-balance bench``."""
+    from cvc_balance.cli.arguments import staged_outputs
     from cvc_balance.study.bench import pareto_front, run
-    rows = run(args.csv, args.png)
+    with staged_outputs([], csv=args.csv, png=args.png) as out:    # checked before 4 minutes
+        rows = run(out['csv'], out['png'])
     for scene in dict.fromkeys(r['scene'] for r in rows):
         print(f'Pareto front, {scene}: {", ".join(pareto_front(rows, scene))}')
     print(f'wrote {args.csv} and {args.png}')

@@ -7,10 +7,9 @@ programs. SI in JSON (g mm for plane unbalances, as the balance verdict
 prints them); angles in degrees where people type or read them.
 """
 
-import json
 import math
 
-from cvc_balance.cli.arguments import finite
+from cvc_balance.cli.arguments import finite, print_json, staged_outputs
 from cvc_balance.design.parameters import design_parameter, parse_parameter, PARAMETERS, UNITS
 from cvc_balance.design.tolerances import describe, load_tolerances, typical_tolerances
 from cvc_balance.physics.engine import RotorModel
@@ -188,7 +187,7 @@ def run_sensitivity(args):
         'parameters': rows,
     }
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
         return 0
     print(_sensitivity_table(summary, tolerances, layout))
     return 0
@@ -248,7 +247,7 @@ def run_tolerance(args):
     result = analyse(model, tolerances, args.samples, args.seed, omega)
     summary = _tolerance_summary(layout, result, allocation)
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
     else:
         print(_tolerance_table(summary, result))
     return 0
@@ -380,11 +379,12 @@ def run_sweep(args):
     if args.derivative and count != 1:
         raise ValueError('--derivative is for one parameter')
     omega = _speed(args, layout)
-    result = sweep(layout, parameters, ranges, points, omega)
-    draw_sweep(result, args.output, derivative=args.derivative)
+    with staged_outputs([args.layout], png=args.output) as out:   # checked before the work
+        result = sweep(layout, parameters, ranges, points, omega)
+        draw_sweep(result, out['png'], derivative=args.derivative)
     summary = _sweep_summary(result)
     if args.json:
-        print(json.dumps(summary))
+        print_json(summary)
         return 0
     for point in summary['balance_points']:
         where = ', '.join(f'{k} = {v:.9g}' for k, v in point['values'].items())
@@ -478,7 +478,7 @@ def run_balance(args):
         'free': rows,
     }
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
         return 0
     print(_balance_table(summary))
     return 0

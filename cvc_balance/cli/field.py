@@ -15,6 +15,7 @@ from pathlib import Path
 import sys
 
 from cvc_balance.cli.arguments import count, positive, print_json
+from cvc_balance.files import check_output, moved_into_when_done, replaced_when_done
 from cvc_balance.physics.frames import degrees
 
 MAX_RECORD_BYTES = 16 * 2**20
@@ -128,6 +129,8 @@ def run_calibrate(args):
     trials = [bag_trial(text) for text in args.trial]
     if len(args.runs) < 2:
         raise ValueError('give the baseline run and one run per trial weight')
+    if args.output:
+        check_output(args.output, args.runs)
     calibration, runs, speed_warnings = calibrate_runs(
         args.runs[0], args.runs[1:], trials, args.keep_trial, args.sensor, args.speed,
         args.speed_tolerance / 100.0, args.joint_name)
@@ -142,9 +145,9 @@ def run_calibrate(args):
     record['warnings'] = speed_warnings + record['warnings']
     warn(record['warnings'])
     if args.output:
-        Path(args.output).write_text(
-            '# Influence coefficients (cvc-balance calibrate; README "Field balancing")\n'
-            + yaml.safe_dump(record, sort_keys=False))
+        with replaced_when_done(args.output) as path:
+            path.write_text('# Influence coefficients (cvc-balance calibrate; README "Field '
+                            'balancing")\n' + yaml.safe_dump(record, sort_keys=False))
     if args.json:
         print_json(record)
     else:
@@ -331,12 +334,13 @@ def run_report(args):
     """Run ``cvc-balance report``."""
     from cvc_balance.report import write_report
 
+    check_output(args.output, [args.bag, args.after, args.coefficients, args.layout])
     summary, result = correction_summary(args)
     if args.after:
         summary['measured_after'] = measured_after(args.after, args, result)
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    files = write_report(summary, out)
+    with moved_into_when_done(out) as staging:
+        files = [out / f.relative_to(staging) for f in write_report(summary, staging)]
     warn(summary['warnings'])
     if args.json:
         print_json({'report': str(out / 'report.html'), 'files': [str(f) for f in files],
