@@ -10,7 +10,7 @@ mass moment keeps the residual's digits: summed in float64, each term's rounding
 The error-free transformations are Knuth's two-sum and Dekker's two-product (with
 Veltkamp's split: numpy has no fused multiply-add). Sums of many terms are exact:
 Rump's extraction cuts each term at a power of two chosen so that the pieces above it
-add without rounding (:func:`partial_sums`), and the few partial sums are rounded once
+add without rounding (:func:`partial_sums_into`), and the few partial sums are rounded once
 by ``math.fsum``. cos and sin of a float64 angle come from a table of cos and sin at
 multiples of h = pi/8192 (double-double, made from integer arithmetic on first use)
 and short polynomials in the remainder |r| <= h/2 where only r, r^2/2 and r^3/6 need
@@ -106,53 +106,26 @@ def power_of_two_above(value):
     return math.ldexp(1.0, exponent - 1 if mantissa == 0.5 else exponent)
 
 
-def partial_sums(hi, lo=None, bound=None):
-    """
-    A few floats whose exact sum is sum(hi + lo) to ~2^-100 of sum |hi|.
-
-    ``hi``, ``lo``: 1-D arrays (``lo`` None for plain floats); ``bound``: a power
-    of two >= max |hi| if known (saves a pass). Rump's extraction (AccSum): with
-    sigma = 2^ceil(log2(n + 2)) bound, q = (hi + sigma) - sigma keeps the bits of
-    each term above ulp(sigma) / 2, and those pieces sum exactly in any order; the
-    remainders go through the same cut once more, then are summed in float64 with
-    ``lo``, where a rounding is ~2^-53 of ~2^-80 of the terms. Exact partial sums
-    of different blocks add up exactly with ``math.fsum``.
-    """
-    hi = np.asarray(hi, dtype=float).ravel()
-    if hi.size == 0:
-        return [0.0]
-    if bound is None:
-        bound = power_of_two_above(float(np.max(np.abs(hi))))
-    if bound == 0.0:
-        return [0.0] if lo is None else [float(np.sum(lo))]
-    gain = power_of_two_above(hi.size + 2.0)
-    sums = []
-    rest = hi
-    sigma = gain * bound
-    for _ in range(2):
-        q = (rest + sigma) - sigma
-        sums.append(float(np.sum(q)))
-        rest = rest - q
-        sigma = gain * sigma * 2.0 ** -53    # the remainders are <= ulp(sigma) / 2
-    if lo is not None:
-        rest = rest + lo
-    sums.append(float(np.sum(rest)))
-    return sums
-
-
 def total(x):
     """
     Sum of a 1-D double-double array, rounded to one float.
 
     Exact to ~2^-100 of sum |terms| whatever the number of terms (see
-    :func:`partial_sums`), then correctly rounded by ``math.fsum``.
+    :func:`partial_sums_into`), then correctly rounded by ``math.fsum``.
     """
-    hi = np.asarray(x[0], dtype=float).ravel()
-    lo = np.asarray(x[1], dtype=float).ravel()
-    block = 1 << 16
+    hi = np.array(x[0], dtype=float).ravel()
+    lo = np.array(x[1], dtype=float).ravel()
+    if not hi.size:
+        return 0.0
+    bound = power_of_two_above(float(np.max(np.abs(hi))))
+    if not bound * 2.0 ** 64 < math.inf:            # sigma would overflow: rare, slow
+        return math.fsum(np.concatenate([hi, lo]).tolist())
     sums = []
-    for start in range(0, hi.size, block):
-        sums += partial_sums(hi[start:start + block], lo[start:start + block])
+    for start in range(0, hi.size, BLOCK):
+        stop = min(start + BLOCK, hi.size)
+        rows = hi[None, start:stop], lo[None, start:stop]
+        sums += partial_sums_into(*rows, [bound], 2, np.empty_like(rows[0]),
+                                  np.empty_like(rows[0]))[0].tolist()
     return math.fsum(sums)
 
 
@@ -352,12 +325,18 @@ def two_sum_into(a, b, s, e, work, subtract=False):
 
 def partial_sums_into(hi, lo, bounds, levels, work, rest):
     """
-    :func:`partial_sums` of the rows of a block: (rows, levels + 1) floats.
+    Per row of a block, levels + 1 floats whose exact sum is the row's sum(hi + lo).
 
-    ``hi``, ``work``, ``rest``: (rows, n); ``lo`` the same or None; ``bounds`` (rows,)
-    powers of two >= max |hi| of each row. Two levels keep ~2^-100 of sum |terms|
-    whatever the cancellation; one suffices for terms of one sign, where the
-    float64 sum of the remainders (each < 2^-38 of the bound) cannot cancel.
+    ``hi``, ``work``, ``rest``: (rows, n) (work and rest overwritten); ``lo`` the same
+    or None; ``bounds``: (rows,) powers of two >= max |hi| of each row, below 2^960.
+    Rump's extraction (AccSum): with sigma = 2^ceil(log2(n + 2)) bound, q = (hi +
+    sigma) - sigma keeps the bits of each term above ulp(sigma) / 2 and those pieces
+    sum exactly in any order; the remainders go through the same cut again at
+    2^-53 sigma. Two levels leave remainders below ~2^-78 of the bound, summed in
+    float64 with ``lo``: ~2^-100 of sum |terms| whatever the cancellation. One level
+    suffices for terms of one sign, where the float64 sum of the remainders (each
+    below 2^-38 of the bound) cannot cancel. Partial sums of different blocks add
+    up exactly with ``math.fsum``.
     """
     gain = power_of_two_above(hi.shape[-1] + 2.0)
     sigma = (gain * np.asarray(bounds, dtype=float))[:, None]

@@ -111,8 +111,8 @@ def place(mass, inertia_own, radius, angle, z):
     bounds = _bounds(top[0], top[1], top[3])
     blocks = [(start, min(start + dd.BLOCK, n)) for start in range(0, n, dd.BLOCK)]
     # A few blocks are done sooner here than handed over (and waited for) on a busy machine.
-    workers = os.cpu_count() or 1 if len(blocks) >= _THREADED_BLOCKS else 1
-    share = -(-len(blocks) // workers)
+    workers = (os.cpu_count() or 1) if len(blocks) >= _THREADED_BLOCKS else 1
+    share = max(-(-len(blocks) // workers), 1)
     shares = [blocks[k:k + share] for k in range(0, len(blocks), share)]
     if len(shares) <= 1:
         partials = [_place_blocks(blocks, arrays, own, bounds, fast)]
@@ -236,13 +236,11 @@ def _own_block(own, cs, cs_lo, cs_p, s, sums):
     for row, (i, j) in zip(block, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
         np.copyto(row, own[:, i, j])
     w, rest = rows('work', 8), rows('rest', 8)
-    np.abs(block, out=w[:6])
     # Every term is at most |I_xx - I_yy| <= 2 max |element|.
-    bound = dd.power_of_two_above(2.0 * float(np.max(w[:6])) * (1.0 + 2.0 ** -40))
+    top = max(float(np.max(block)), -float(np.min(block)))
+    bound = dd.power_of_two_above(2.0 * top * (1.0 + 2.0 ** -40))
     _add_sums(sums, _OWN_POSITIVE, block[:3], None, bound, 1, w[:3], rest[:3])
-    c, sn = cs
-    c_lo, sn_lo = cs_lo
-    c_p, s_p = (cs_p[0][0], cs_p[1][0]), (cs_p[0][1], cs_p[1][1])
+    c, c_lo, c_p = cs[0], cs_lo[0], (cs_p[0][0], cs_p[1][0])
     terms, terms_lo = rows('own_terms', 8), rows('own_terms_lo', 8)
     names = []
     d, d_lo = rows('d', 2)
