@@ -508,10 +508,11 @@ def cos_sin_into(angle, s, fast=None):
     two_sum_into(table, vers_t, middle, middle_lo, w2, subtract=True)
     out, out_lo = s('cos_sin', n, rows=2), s('cos_sin_lo', n, rows=2)
     two_sum_into(middle, turn, out, out_lo, w2)
-    out_lo += middle_lo
-    out_lo += table_lo
-    out_lo -= vers_t_lo
-    out_lo += turn_lo
+    # The low parts, smallest first: three of them reach ulp(hi) / 2, each sum rounds.
+    turn_lo -= vers_t_lo
+    turn_lo += table_lo
+    middle_lo += out_lo
+    np.add(turn_lo, middle_lo, out=out_lo)
     return out, out_lo
 
 
