@@ -10,7 +10,7 @@ mass moment keeps the residual's digits: summed in float64, each term's rounding
 The error-free transformations are Knuth's two-sum and Dekker's two-product (with
 Veltkamp's split: numpy has no fused multiply-add). Sums of many terms are exact:
 Rump's extraction cuts each term at a power of two chosen so that the pieces above it
-add without rounding (:func:`partial_sums_into`), and the few partial sums are rounded once
+add without rounding (:func:`trace_partial_sums`), and the few partial sums are rounded once
 by ``math.fsum``. cos and sin of a float64 angle come from a table of cos and sin at
 multiples of h = pi/8192 (double-double, made from integer arithmetic on first use)
 and short polynomials in the remainder |r| <= h/2 where only r, r^2/2 and r^3/6 need
@@ -110,8 +110,9 @@ def total(x):
     """
     Sum of a 1-D double-double array, rounded to one float.
 
-    Exact to ~2^-100 of sum |terms| whatever the number of terms (see
-    :func:`partial_sums_into`), then correctly rounded by ``math.fsum``.
+    Exact to ~2^-100 of sum |terms| whatever the number of terms (two levels of
+    Rump's extraction, see :func:`trace_partial_sums`), then correctly rounded by
+    ``math.fsum``.
     """
     hi = np.array(x[0], dtype=float).ravel()
     lo = np.array(x[1], dtype=float).ravel()
@@ -122,10 +123,12 @@ def total(x):
         return math.fsum(np.concatenate([hi, lo]).tolist())
     sums = []
     for start in range(0, hi.size, BLOCK):
-        stop = min(start + BLOCK, hi.size)
-        rows = hi[None, start:stop], lo[None, start:stop]
-        sums += partial_sums_into(*rows, [bound], 2, np.empty_like(rows[0]),
-                                  np.empty_like(rows[0]))[0].tolist()
+        rest, rest_lo = hi[start:start + BLOCK], lo[start:start + BLOCK]
+        for sigma in sigma_for(rest.size, [bound], 2)[0]:
+            q = (rest + sigma) - sigma
+            sums.append(float(np.sum(q)))
+            rest = rest - q
+        sums.append(float(np.sum(rest + rest_lo)))
     return math.fsum(sums)
 
 
@@ -228,162 +231,307 @@ def _tables():
     return _TABLES[0]
 
 
-# --- Blocks of work in reused arrays.
+# --- Straight-line kernels, traced once and run block after block.
 
-BLOCK = 16384
-"""Elements per block of the vectorised kernels: their scratch arrays stay in cache."""
+BLOCK = 8192
+"""Elements per block of the vectorised kernels (their working arrays stay in cache)."""
 
 
-class Scratch:
+class Ref:
     """
-    Named arrays reused from block to block (one per thread: see :func:`scratch`).
+    A symbolic array of a :class:`Tracer`: (n,) or (rows, n), or a view of one.
 
-    Fresh memory costs page faults (~2 ms per MB on the project's virtual machine)
-    and cache misses; a kernel that writes its intermediate values into the same
-    few arrays block after block runs several times faster.
+    Arithmetic on Refs records numpy calls; ``a += b`` records an in-place one.
+    """
+
+    __slots__ = ('tracer', 'base', 'path', 'rows')
+
+    def __init__(self, tracer, base, path, rows):
+        """A view ``path`` (indexing keys, or 'int' for an int64 view) of ``base``."""
+        self.tracer, self.base, self.path, self.rows = tracer, base, path, rows
+
+    def __getitem__(self, key):
+        """Rows of a stacked array: an int (one row), a slice, None (a new axis), or a
+        tuple (rows first) for the caller's small arrays."""
+        first = key[0] if isinstance(key, tuple) else key
+        if first is None:
+            rows = 1
+        elif isinstance(first, int):
+            rows = None
+        else:
+            rows = len(range(*first.indices(self.rows)))
+        return Ref(self.tracer, self.base, self.path + (key,), rows)
+
+    def __setitem__(self, key, value):
+        # After ``a[k] += b`` (already recorded in place on the view a[k]): nothing to do.
+        if not (isinstance(value, Ref) and value.base == self.base
+                and value.path == self.path + (key,)):
+            raise TypeError('assign to a traced array with Tracer.call')
+
+    def bits(self):
+        """The same memory seen as int64."""
+        return Ref(self.tracer, self.base, self.path + ('int',), self.rows)
+
+    def _binary(self, function, other, swap=False):
+        a, b = (other, self) if swap else (self, other)
+        return self.tracer.apply(function, a, b)
+
+    def __add__(self, other):
+        return self._binary(np.add, other)
+
+    def __radd__(self, other):
+        return self._binary(np.add, other, True)
+
+    def __sub__(self, other):
+        return self._binary(np.subtract, other)
+
+    def __rsub__(self, other):
+        return self._binary(np.subtract, other, True)
+
+    def __mul__(self, other):
+        return self._binary(np.multiply, other)
+
+    def __rmul__(self, other):
+        return self._binary(np.multiply, other, True)
+
+    def __neg__(self):
+        return self.tracer.apply(np.negative, self)
+
+    def __iadd__(self, other):
+        self.tracer.call(np.add, self, other, self)
+        return self
+
+    def __isub__(self, other):
+        self.tracer.call(np.subtract, self, other, self)
+        return self
+
+    def __imul__(self, other):
+        self.tracer.call(np.multiply, self, other, self)
+        return self
+
+
+class Tracer:
+    """
+    Records a straight-line numpy program on :class:`Ref` arrays.
+
+    :meth:`compile` then gives each temporary array rows of one (rows, n) array by
+    liveness (first fit), so the program's working set is what is live at once;
+    :meth:`Program.bind` resolves every view for a block length n. Run, the program
+    is a list of (function, arguments) calls with nothing left to look up: numpy's
+    ufuncs, whose per-call cost then dominates the Python side.
     """
 
     def __init__(self):
-        """Start with no arrays."""
-        self._arrays = {}
-        self._views = {}
+        """An empty program."""
+        self.ops = []
+        self.rows = []               # internal arrays: rows (None: one row, 1-D)
+        self.span = []               # [first, last] op using each internal array
+        self.externals = {}          # name -> rows; bound to the caller's arrays
 
-    def __call__(self, name, n, dtype=float, rows=None):
-        """Return the array ``name`` of n elements, or (rows, n); contents undefined."""
-        key = (name, n, rows)
-        view = self._views.get(key)
-        if view is None:
-            size = n * (rows or 1)
-            array = self._arrays.get(name)
-            if array is None or array.size < size:
-                array = self._arrays[name] = np.empty(max(size, BLOCK), dtype)
-                self._views = {k: v for k, v in self._views.items() if k[0] != name}
-            view = self._views[key] = (array[:size] if rows is None
-                                       else array[:size].reshape(rows, n))
-        return view
+    def new(self, rows=None):
+        """A fresh internal array of n (or rows x n) elements."""
+        self.rows.append(rows)
+        self.span.append([len(self.ops), len(self.ops)])
+        return Ref(self, len(self.rows) - 1, (), rows)
+
+    def external(self, name, rows=None, shape=None):
+        """
+        An array the caller binds (inputs, results): n or (rows, n) elements, or of
+        ``shape`` (small arrays: sums, sigmas); read and written in place.
+        """
+        self.externals[name] = shape or rows
+        return Ref(self, name, (), rows)
+
+    def call(self, function, *args):
+        """Record function(*args) (an output array, if any, among the args)."""
+        for arg in args:
+            if isinstance(arg, Ref) and isinstance(arg.base, int):
+                span = self.span[arg.base]
+                span[0], span[1] = min(span[0], len(self.ops)), len(self.ops)
+        self.ops.append((function, args))
+
+    def apply(self, function, *args):
+        """Record function(*args, out) into a new array of the operands' shape."""
+        rows = [a.rows for a in args if isinstance(a, Ref)]
+        out = self.new(None if all(r is None for r in rows) else max(r or 1 for r in rows))
+        self.call(function, *args, out)
+        return out
+
+    def keep(self, *refs):
+        """Keep internal arrays alive to the end (results read after a run)."""
+        for ref in refs:
+            self.span[ref.base][1] = len(self.ops) + 1
+
+    def compile(self):
+        """The :class:`Program`: internal arrays laid out in rows by liveness."""
+        free_after = []              # per row: the last op of its current array
+        start = [0] * len(self.rows)
+        for base in sorted(range(len(self.rows)), key=lambda b: self.span[b][0]):
+            first, last = self.span[base]
+            size = self.rows[base] or 1
+            row = 0
+            while any(free_after[r] >= first for r in range(row, min(row + size,
+                                                                     len(free_after)))):
+                row += 1
+            free_after += [-1] * max(row + size - len(free_after), 0)
+            free_after[row:row + size] = [last] * size
+            start[base] = row
+        return Program(self.ops, self.rows, start, len(free_after), dict(self.externals))
 
 
-_LOCAL = threading.local()
+class Program:
+    """A compiled :class:`Tracer` program; :meth:`bind` it to run it."""
+
+    def __init__(self, ops, rows, start, total_rows, externals):
+        """See :meth:`Tracer.compile`."""
+        self.ops, self.rows, self.start = ops, rows, start
+        self.total_rows, self.externals = total_rows, externals
+
+    def bind(self, n, arrays):
+        """
+        Return the program's calls resolved for blocks of n elements, as a callable.
+
+        ``arrays``: name -> the caller's array for each external (kept, reused run
+        after run: write inputs into them, read results from them).
+        """
+        space = np.empty((self.total_rows, n))
+
+        def resolve(arg):
+            if not isinstance(arg, Ref):
+                return arg
+            if isinstance(arg.base, str):
+                view = arrays[arg.base]
+            else:
+                first = self.start[arg.base]
+                view = (space[first] if self.rows[arg.base] is None
+                        else space[first:first + self.rows[arg.base]])
+            for key in arg.path:
+                view = view.view(np.int64) if key == 'int' else view[key]
+            return view
+
+        calls = [(function, tuple(resolve(a) for a in args)) for function, args in self.ops]
+
+        def run():
+            for function, args in calls:
+                function(*args)
+        return run
 
 
-def scratch():
-    """Return this thread's :class:`Scratch`."""
-    if not hasattr(_LOCAL, 'scratch'):
-        _LOCAL.scratch = Scratch()
-    return _LOCAL.scratch
-
-
-def split_into(a, hi, lo):
+def trace_split(t, a):
     """
-    Split ``a`` into ``hi`` (26 significant bits) + ``lo`` (26 bits and a sign), exactly.
+    Split ``a`` into hi (26 significant bits) + lo (26 bits and a sign), exactly.
 
     As Veltkamp's split, in three operations: round the bit pattern at bit 27 (an
-    integer add), clear the 27 low bits, subtract. ``hi``, ``lo`` distinct from ``a``.
+    integer add), clear the 27 low bits, subtract.
     """
-    bits = hi.view(np.int64)
-    np.add(a.view(np.int64), 1 << 26, out=bits)
-    np.bitwise_and(bits, _HIGH_BITS, out=bits)
-    np.subtract(a, hi, out=lo)
+    hi = t.new(a.rows)
+    t.call(np.add, a.bits(), 1 << 26, hi.bits())
+    t.call(np.bitwise_and, hi.bits(), _HIGH_BITS, hi.bits())
+    return hi, a - hi
 
 
-def two_prod_into(a, a_parts, b, b_parts, p, e, work):
-    """:func:`two_prod_split` written into ``p``, ``e`` (broadcasting); ``work`` overwritten."""
-    multiply, add = np.multiply, np.add
-    multiply(a, b, p)
-    multiply(a_parts[0], b_parts[0], e)
-    np.subtract(e, p, e)
-    multiply(a_parts[0], b_parts[1], work)
-    add(e, work, e)
-    multiply(a_parts[1], b_parts[0], work)
-    add(e, work, e)
-    multiply(a_parts[1], b_parts[1], work)
-    add(e, work, e)
-
-
-def add_product(e, a, b, work):
-    """e += a b (rounded), ``work`` overwritten."""
-    np.multiply(a, b, work)
-    np.add(e, work, e)
-
-
-def two_sum_into(a, b, s, e, work, subtract=False):
-    """:func:`two_sum` of a and b (a - b if ``subtract``) into s, e; all distinct arrays."""
-    if subtract:
-        np.subtract(a, b, out=s)
-    else:
-        np.add(a, b, out=s)
-    np.subtract(s, a, out=work)              # b as it went into s
-    np.subtract(s, work, out=e)
-    np.subtract(a, e, out=e)                 # what of a did not
-    if subtract:
-        work += b
-        e -= work
-    else:
-        np.subtract(b, work, out=work)
-        e += work
-
-
-def partial_sums_into(hi, lo, bounds, levels, work, rest):
+def trace_two_prod(t, a, a_parts, b, b_parts, out=None):
     """
-    Per row of a block, levels + 1 floats whose exact sum is the row's sum(hi + lo).
+    (p, e), p = fl(a b), p + e = a b exactly (Dekker), from split factors.
 
-    ``hi``, ``work``, ``rest``: (rows, n) (work and rest overwritten); ``lo`` the same
-    or None; ``bounds``: (rows,) powers of two >= max |hi| of each row, below 2^960.
-    Rump's extraction (AccSum): with sigma = 2^ceil(log2(n + 2)) bound, q = (hi +
-    sigma) - sigma keeps the bits of each term above ulp(sigma) / 2 and those pieces
-    sum exactly in any order; the remainders go through the same cut again at
-    2^-53 sigma. Two levels leave remainders below ~2^-78 of the bound, summed in
-    float64 with ``lo``: ~2^-100 of sum |terms| whatever the cancellation. One level
-    suffices for terms of one sign, where the float64 sum of the remainders (each
-    below 2^-38 of the bound) cannot cancel. Partial sums of different blocks add
-    up exactly with ``math.fsum``.
+    ``out``: two arrays (views) to write p and e to, else new ones.
     """
-    gain = power_of_two_above(hi.shape[-1] + 2.0)
-    sigma = (gain * np.asarray(bounds, dtype=float))[:, None]
-    sums = np.empty((hi.shape[0], levels + 1))
+    (a1, a2), (b1, b2) = a_parts, b_parts
+    if out is None:
+        p = a * b
+        return p, (((a1 * b1 - p) + a1 * b2) + a2 * b1) + a2 * b2
+    p, e = out
+    t.call(np.multiply, a, b, p)
+    t.call(np.add, ((a1 * b1 - p) + a1 * b2) + a2 * b1, a2 * b2, e)
+    return p, e
+
+
+def trace_two_sum(t, a, b):
+    """(s, e), s = fl(a + b), s + e = a + b exactly (Knuth)."""
+    s = a + b
+    bb = s - a
+    return s, (a - (s - bb)) + (b - bb)
+
+
+def trace_quick_two_sum(t, a, b):
+    """(s, e), s + e = a + b exactly, for |a| >= |b| (or a = 0)."""
+    s = a + b
+    return s, b - (s - a)
+
+
+def trace_partial_sums(t, hi, lo, sigma, levels, sums):
+    """
+    Per row of ``hi``, levels + 1 floats whose exact sum is the row's sum(hi + lo).
+
+    ``hi`` (rows, n), ``lo`` the same or None; ``sigma`` an external (rows, levels)
+    array (:func:`sigma_for`); ``sums`` an external (rows, levels + 1) array the
+    results are written to. Rump's extraction (AccSum): with sigma = 2^ceil(log2(n +
+    2)) times a power of two >= max |hi| of the row, q = (hi + sigma) - sigma keeps
+    the bits of each term above ulp(sigma) / 2 and those pieces sum exactly in any
+    order; the remainders go through the same cut again, 2^-53 lower. Two levels
+    leave remainders below ~2^-78 of the bound, summed in float64 with ``lo``:
+    ~2^-100 of sum |terms| whatever the cancellation. One level suffices for terms of
+    one sign, where the float64 sum of the remainders (each below 2^-38 of the bound)
+    cannot cancel. Partial sums of different blocks add up exactly with ``math.fsum``.
+    """
+    rest = hi
     for level in range(levels):
-        np.add(rest if level else hi, sigma, out=work)
-        work -= sigma                           # the bits above ulp(sigma) / 2
-        np.sum(work, axis=1, out=sums[:, level])     # exact
-        if level:
-            rest -= work                        # exact, |rest| <= ulp(sigma) / 2
-        else:
-            np.subtract(hi, work, out=rest)
-        sigma = sigma * (gain * 2.0 ** -53)
+        cut = sigma[:, level:level + 1]
+        q = (rest + cut) - cut
+        t.call(np.add.reduce, q, -1, None, sums[:, level])
+        rest = rest - q
     if lo is not None:
-        rest += lo
-    np.sum(rest, axis=1, out=sums[:, levels])
-    return sums
+        rest = rest + lo
+    t.call(np.add.reduce, rest, -1, None, sums[:, levels])
+
+
+def sigma_for(n, bounds, levels):
+    """
+    The (rows, levels) sigma of :func:`trace_partial_sums` for blocks of n elements.
+
+    ``bounds``: powers of two >= max |term| of each row, below 2^960.
+    """
+    gain = power_of_two_above(n + 2.0)
+    first = gain * np.asarray(bounds, dtype=float)[:, None]
+    return first * (gain * 2.0 ** -53) ** np.arange(levels)
 
 
 # --- cos and sin.
 
-def _reduce_into(angle, tables, index, r_hi, r_lo, s, fast=None):
-    """
-    Write index, r_hi, r_lo: angle = index h + r_hi + r_lo (mod 2 pi) to ~2^-110.
+def cos_sin_fast_limit():
+    """|angle| (rad) up to which the direct reduction applies (402 rad)."""
+    return _tables().fast_limit
 
-    Cody and Waite's reduction with split constants: each product of an integer and a
-    part is exact, so the only roundings are in the last, smallest parts.
+
+def trace_reduction(t, angle):
     """
-    n = angle.size
+    (index, r_hi, r_lo): angle = index h + r_hi + r_lo (mod 2 pi) to ~2^-110.
+
+    For |angle| <= :func:`cos_sin_fast_limit`: Cody and Waite's reduction with h in
+    split parts, each product of an integer and a part exact, so the only roundings
+    are in the last, smallest parts. (Larger angles: :func:`reduce_angles`.)
+    """
+    tables = _tables()
     h1, h2, h3 = tables.step
-    if fast is None:
-        fast = not n or float(np.max(np.abs(angle))) <= tables.fast_limit
-    j, t, u = s('reduce_j', n), s('reduce_t', n), s('reduce_u', n)
-    if fast:
-        np.multiply(angle, tables.inverse_step, out=j)
-        j += _MAGIC                                 # rounds to an integer
-        np.bitwise_and(j.view(np.int64), _TABLE_SIZE - 1, out=index)
-        j -= _MAGIC
-        np.multiply(j, h1, out=t)
-        np.subtract(angle, t, out=t)                # exact
-        np.multiply(j, h2, out=u)
-        two_sum_into(t, u, r_hi, r_lo, s('reduce_w', n), subtract=True)
-        np.multiply(j, h3, out=u)
-        r_lo -= u
-        return
-    # Up to 2^31: k turns of 2 pi off first (the first two differences are exact).
+    shifted = angle * tables.inverse_step + _MAGIC          # rounded to an integer
+    index = t.new()
+    t.call(np.bitwise_and, shifted.bits(), _TABLE_SIZE - 1, index.bits())
+    j = shifted - _MAGIC
+    r_hi, e = trace_two_sum(t, angle - j * h1, -(j * h2))   # angle - j h1 is exact
+    return index, r_hi, e - j * h3
+
+
+def reduce_angles(angle):
+    """
+    (index, r_hi, r_lo) of :func:`trace_reduction` for any angles, as new arrays.
+
+    Up to 2^31 rad: k turns of 2 pi (in six parts of 24 bits) off first, the first
+    two differences exact; beyond, in integers (a few microseconds an angle).
+    """
+    tables = _tables()
+    h1, h2, h3 = tables.step
     p1, p2, p3, p4, p5, p6 = tables.turn
+    index = np.empty(angle.shape, np.int64)
     with np.errstate(invalid='ignore', over='ignore'):
         k = np.rint(angle * tables.inverse_turn)
         k[~(np.abs(angle) < _GENERAL_LIMIT)] = 0.0      # huge or not finite: see below
@@ -393,15 +541,11 @@ def _reduce_into(angle, tables, index, r_hi, r_lo, s, fast=None):
         j = shifted - _MAGIC
         s1, e1 = two_sum(t - j * h1, -k * p3)
         s2, e2 = two_sum(s1, -j * h2)
-        r_hi[:], e3 = two_sum(s2, -k * p4)
-        r_lo[:] = ((e1 + e2) + e3) - j * h3 - k * p5 - k * p6
+        r_hi, e3 = two_sum(s2, -k * p4)
+        r_lo = ((e1 + e2) + e3) - j * h3 - k * p5 - k * p6
     for i in np.flatnonzero(np.isfinite(angle) & ~(np.abs(angle) < _GENERAL_LIMIT)):
         index[i], r_hi[i], r_lo[i] = _reduce_exactly(float(angle[i]), tables)
-
-
-def cos_sin_fast_limit():
-    """|angle| (rad) up to which :func:`cos_sin_into` may be told ``fast``."""
-    return _tables().fast_limit
+    return index, r_hi, r_lo
 
 
 def _reduce_exactly(angle, tables):
@@ -415,125 +559,130 @@ def _reduce_exactly(angle, tables):
     return j % _TABLE_SIZE, r_hi, float(r - Fraction(r_hi))
 
 
-def cos_sin_into(angle, s, fast=None):
+def trace_cos_sin(t, index, a, b):
     """
-    (cos, sin) of one block of float64 angles as unnormalised double-doubles.
+    (cos, sin) of index h + a + b as unnormalised double-doubles, rows [cos, sin].
 
-    ``angle`` is 1-D and contiguous; ``s`` a :class:`Scratch`; ``fast``: True if
-    the caller knows every |angle| <= 402 rad (skips a pass). Returns (hi, lo), two
-    (2, n) scratch arrays (rows cos, sin; named 'cos_sin', 'cos_sin_lo'), valid until
-    the next call: hi + lo is within ~3e-32 of the value; lo is not always below
-    ulp(hi), which products and sums that follow do not need.
+    ``index``: int64 (as floats' bits), |a + b| <= h/2 (1.9e-4 rad). hi + lo is within
+    ~4e-32 of the value; lo is not always below ulp(hi), which products and sums
+    that follow do not need.
     """
-    n = angle.size
     tables = _tables()
-    index = s('index', n, np.int64)
-    a, b = s('r', n), s('r_lo', n)
-    _reduce_into(angle, tables, index, a, b, s, fast)
-    w = s('work', n)
     # The table's cos and sin at index h, rows [C, S].
-    table, table_lo = s('table', n, rows=2), s('table_lo', n, rows=2)
+    table, table_lo = t.new(2), t.new(2)
     for values, out in ((tables.cos_hi, table[0]), (tables.sin_hi, table[1]),
                         (tables.cos_lo, table_lo[0]), (tables.sin_lo, table_lo[1])):
-        np.take(values, index, out=out, mode='clip')
-    # r = a + b, |r| <= h/2 = 1.9e-4: r^2 = p + pl, r^3 = q + ql exactly enough.
-    a_parts = (s('r_1', n), s('r_2', n))
-    split_into(a, *a_parts)
-    p, pl = s('p', n), s('p_lo', n)
-    two_prod_into(a, a_parts, a, a_parts, p, pl, w)
-    np.add(a, a, out=w)
-    w *= b
-    pl += w
-    p_parts = (s('p_1', n), s('p_2', n))
-    split_into(p, *p_parts)
-    q, ql = s('q', n), s('q_lo', n)
-    two_prod_into(p, p_parts, a, a_parts, q, ql, w)
-    add_product(ql, pl, a, w)
-    add_product(ql, p, b, w)
+        t.call(values.take, index.bits(), None, out, 'clip')
+    # r = a + b: r^2 = p + pl and r^3 = q + ql exactly enough.
+    a_parts = trace_split(t, a)
+    p, pl = trace_two_prod(t, a, a_parts, a, a_parts)
+    pl += (a + a) * b
+    p_parts = trace_split(t, p)
+    q, ql = trace_two_prod(t, p, p_parts, a, a_parts)
+    ql += pl * a
+    ql += p * b
     # v = r^3/6 with v_hi of 51 bits (Veltkamp with 2^2 + 1), so that 6 v_hi and
     # q - 6 v_hi are exact.
-    v_hi, v_lo = s('v', n), s('v_lo', n)
-    np.multiply(q, 1.0 / 6.0, out=v_lo)
-    np.multiply(v_lo, 5.0, out=v_hi)
-    np.subtract(v_hi, v_lo, out=w)
-    v_hi -= w
-    np.multiply(v_hi, -6.0, out=v_lo)
-    v_lo += q
-    v_lo += ql
-    v_lo *= 1.0 / 6.0
-    # sin r = r - r^3/6 + r^5/120 - r^7/5040 = sin_hi + sin_lo.
-    sin_hi, sin_lo = s('sin_r', n), s('sin_r_lo', n)
-    np.subtract(a, v_hi, out=sin_hi)                # |a| >= |v_hi|: quick two-sum
-    np.subtract(a, sin_hi, out=sin_lo)
-    sin_lo -= v_hi
-    sin_lo += b
-    sin_lo -= v_lo
-    np.multiply(p, -1.0 / 5040.0, out=w)
-    w += 1.0 / 120.0
-    w *= p
-    w *= q
-    sin_lo += w
+    v0 = q * (1.0 / 6.0)
+    c5 = v0 * 5.0
+    v_hi = c5 - (c5 - v0)
+    v_lo = ((q - v_hi * 6.0) + ql) * (1.0 / 6.0)
+    # sin r = r - r^3/6 + r^5/120 - r^7/5040 = sin_hi + sin_lo (|a| >= |v_hi|).
+    sin_hi, sin_e = trace_quick_two_sum(t, a, -v_hi)
+    sin_lo = ((sin_e + b) - v_lo) + q * (p * (1.0 / 120.0 - p * (1.0 / 5040.0)))
     # 1 - cos r = r^2/2 - r^4/24 + r^6/720 = vers_hi + vers_lo, with r^4 = p^2 + 2 p pl
     # (pl reaches ~1e-22 when r_lo ~ 1e-19 after reducing a large angle).
-    vers_hi, vers_lo = s('vers', n), s('vers_lo', n)
-    np.multiply(p, -1.0 / 720.0, out=vers_lo)
-    vers_lo += 1.0 / 24.0
-    vers_lo *= p
-    add_product(vers_lo, pl, 1.0 / 12.0, w)
-    vers_lo *= p
-    np.multiply(pl, 0.5, out=w)
-    np.subtract(w, vers_lo, out=vers_lo)
-    np.multiply(p, 0.5, out=vers_hi)
-    vers_parts = p_parts                            # halved: p's split is no longer needed
-    for part in vers_parts:
-        part *= 0.5
-    sin_parts = a_parts                             # r's split is no longer needed
-    split_into(sin_hi, *sin_parts)
+    vers_hi = p * 0.5
+    vers_lo = pl * 0.5 - p * (p * (1.0 / 24.0 - p * (1.0 / 720.0)) + pl * (1.0 / 12.0))
+    vers_parts = (p_parts[0] * 0.5, p_parts[1] * 0.5)
+    sin_parts = trace_split(t, sin_hi)
     # Turned by the table's angle: [cos, sin] = [C, S] - [C, S] vers + [-S, C] sin r.
-    w2 = s('work2', n, rows=2)
-    table_parts = (s('table_1', n, rows=2), s('table_2', n, rows=2))
-    split_into(table, *table_parts)
-    turn, turn_lo = s('turn', n, rows=2), s('turn_lo', n, rows=2)
-    two_prod_into(table, table_parts, sin_hi, sin_parts, turn, turn_lo, w2)
-    add_product(turn_lo, table, sin_lo, w2)
-    add_product(turn_lo, table_lo, sin_hi, w2)
-    turn, turn_lo = turn[::-1], turn_lo[::-1]       # rows [S sin r, C sin r]
-    np.negative(turn[0], out=turn[0])
-    np.negative(turn_lo[0], out=turn_lo[0])
-    vers_t, vers_t_lo = s('vers_t', n, rows=2), s('vers_t_lo', n, rows=2)
-    two_prod_into(table, table_parts, vers_hi, vers_parts, vers_t, vers_t_lo, w2)
-    add_product(vers_t_lo, table, vers_lo, w2)
-    add_product(vers_t_lo, table_lo, vers_hi, w2)
-    middle, middle_lo = table_parts                 # free now
-    two_sum_into(table, vers_t, middle, middle_lo, w2, subtract=True)
-    out, out_lo = s('cos_sin', n, rows=2), s('cos_sin_lo', n, rows=2)
-    two_sum_into(middle, turn, out, out_lo, w2)
+    table_parts = trace_split(t, table)
+    turn, turn_lo = trace_two_prod(t, table, table_parts, sin_hi, sin_parts)
+    turn_lo += table * sin_lo
+    turn_lo += table_lo * sin_hi
+    t.call(np.negative, turn[1], turn[1])           # rows [C sin r, -S sin r]
+    t.call(np.negative, turn_lo[1], turn_lo[1])
+    vers_t, vers_t_lo = trace_two_prod(t, table, table_parts, vers_hi, vers_parts)
+    vers_t_lo += table * vers_lo
+    vers_t_lo += table_lo * vers_hi
+    # |C vers| <= |C|: a quick two-sum; the turn can outweigh what is left: a full one.
+    middle, middle_lo = trace_quick_two_sum(t, table, -vers_t)
+    out, out_lo = trace_two_sum(t, middle, turn[::-1])
     # The low parts, smallest first: three of them reach ulp(hi) / 2, each sum rounds.
-    turn_lo -= vers_t_lo
-    turn_lo += table_lo
-    middle_lo += out_lo
-    np.add(turn_lo, middle_lo, out=out_lo)
+    out_lo = ((turn_lo[::-1] - vers_t_lo) + table_lo) + (middle_lo + out_lo)
     return out, out_lo
+
+
+_COS_SIN = {}
+_LOCAL = threading.local()
+
+
+def bound(cache, key, program, shared=None):
+    """
+    (arrays, run) of ``program()`` bound for blocks of key[-1] elements, cached.
+
+    ``cache``: a thread's dict; the few most recent keys are kept (a layout of
+    every size has one short last block). The externals are new arrays of n or
+    (rows, n) elements (or their shape), but those in ``shared`` (name -> array).
+    """
+    if key in cache:
+        cache[key] = cache.pop(key)                 # most recent last
+        return cache[key]
+    compiled, n = program(), key[-1]
+    arrays = {name: (shared[name] if shared and name in shared
+                     else np.empty(size) if isinstance(size, tuple)
+                     else np.empty((size, n)) if size else np.empty(n))
+              for name, size in compiled.externals.items()}
+    cache[key] = (arrays, compiled.bind(n, arrays))
+    while len(cache) > 16:
+        cache.pop(next(iter(cache)))
+    return cache[key]
+
+
+def _cos_sin_program(fast):
+    """The cos/sin program: from angles (fast) or from reduced angles."""
+    if fast not in _COS_SIN:
+        t = Tracer()
+        if fast:
+            index, a, b = trace_reduction(t, t.external('angle'))
+        else:
+            index, a, b = (t.external(name) for name in ('index', 'r_hi', 'r_lo'))
+        value, value_lo = trace_cos_sin(t, index, a, b)
+        # Normalised, |lo| <= ulp(hi) / 2 (quick two-sum: |value| >= |value_lo|).
+        hi, lo = t.external('hi', 2), t.external('lo', 2)
+        t.call(np.add, value, value_lo, hi)
+        t.call(np.subtract, value_lo, hi - value, lo)
+        _COS_SIN[fast] = t.compile()
+    return _COS_SIN[fast]
 
 
 def cos_sin(angle):
     """
-    Return (cos, sin) of float64 angles (rad) as double-doubles, error < ~3e-32.
+    Return (cos, sin) of float64 angles (rad) as double-doubles, error < ~4e-32.
 
     Any finite angle: the reduction by pi/8192 is exact (split constants up to
     2^31 rad, integer arithmetic beyond); not finite gives nan. Measured against
-    60-digit mpmath: see test/test_stability.py and benchmarks/aggregation.py.
+    60-digit mpmath: test/test_compensated.py and benchmarks/aggregation.py.
     """
     angle = np.asarray(angle, dtype=float)
     flat = np.ascontiguousarray(angle.ravel())
     hi, lo = np.empty((2, flat.size)), np.empty((2, flat.size))
-    s = scratch()
+    fast_limit = cos_sin_fast_limit()
+    runs = getattr(_LOCAL, 'cos_sin', None)
+    if runs is None:
+        runs = _LOCAL.cos_sin = {}
     for start in range(0, flat.size, BLOCK):
         stop = min(start + BLOCK, flat.size)
-        value, value_lo = cos_sin_into(flat[start:stop], s)
-        # Normalised, |lo| <= ulp(hi) / 2 (quick two-sum: |value| >= |value_lo|).
-        np.add(value, value_lo, out=hi[:, start:stop])
-        np.subtract(hi[:, start:stop], value, out=lo[:, start:stop])
-        np.subtract(value_lo, lo[:, start:stop], out=lo[:, start:stop])
+        block = flat[start:stop]
+        fast = bool(np.max(np.abs(block)) <= fast_limit)
+        arrays, run = bound(runs, (fast, stop - start), lambda: _cos_sin_program(fast))
+        if fast:
+            arrays['angle'][:] = block
+        else:
+            index, arrays['r_hi'][:], arrays['r_lo'][:] = reduce_angles(block)
+            arrays['index'].view(np.int64)[:] = index
+        run()
+        hi[:, start:stop], lo[:, start:stop] = arrays['hi'], arrays['lo']
     return ((hi[0].reshape(angle.shape), lo[0].reshape(angle.shape)),
             (hi[1].reshape(angle.shape), lo[1].reshape(angle.shape)))

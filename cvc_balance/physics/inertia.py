@@ -16,6 +16,7 @@ Units: kg, m, kg m, kg m^2. Tensors hold tensor elements (see
 from dataclasses import dataclass
 import math
 import os
+import threading
 
 import numpy as np
 
@@ -96,8 +97,9 @@ def place(mass, inertia_own, radius, angle, z):
     The terms are those of :func:`parallel_axis_cvc` (the own tensor turned by
     theta, plus the shift), each evaluated to ~2^-100 of itself in double-double
     and summed exactly (:mod:`cvc_balance.physics.compensated`): each aggregate is
-    within an ulp or so of the exact sum for the given numbers, so a layout balanced
-    to 1e-9 of its mass moment keeps its residual unbalance to ~1e-16, not ~1e-7.
+    its exact value for the given numbers, rounded (unless it cancels below ~1e-17
+    of its terms: then within ~1e-32 of them), so a layout balanced to 1e-9 of its
+    mass moment keeps its residual unbalance to ~1e-16, not ~1e-7.
     """
     mass = np.atleast_1d(np.asarray(mass, dtype=float))
     arrays = [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), mass.shape))
@@ -125,169 +127,197 @@ def place(mass, inertia_own, radius, angle, z):
 
 _THREADED_BLOCKS = 4
 
-# The sums, in the rows of the kernel's stacked arrays: terms of either sign (summed to
-# ~2^-100 of sum |terms|) and terms of one sign (no cancellation: one level suffices).
-_SIGNED = ('mx', 'my', 'mz', 'mxz', 'myz', 'mxy')
-_POSITIVE = ('m', 'mxx', 'myy', 'mzz')
-_OWN_POSITIVE = ('oxx', 'oyy', 'ozz')
-_OWN_SIGNED = ('c2d', 'csd', 'c2b', 'csb', 'b', 'cxz', 'syz', 'sxz', 'cyz')
+# The sums, by the rows of the kernel's arrays they come from; levels of extraction:
+# two for terms of either sign (summed to ~2^-100 of sum |terms|), one for terms of one
+# sign (no cancellation: exact enough with one).
+_SUMS = (('first', ('mx', 'my', 'mz'), 2), ('products', ('mxz', 'myz', 'mxy'), 2),
+         ('squares', ('mxx', 'myy', 'mzz'), 1), ('mass', ('m',), 1))
+_OWN_SUMS = {'own': (('own_diagonal', ('oxx', 'oyy', 'ozz'), 1),),
+             'd': (('own_d', ('c2d', 'csd'), 2),),
+             'b': (('own_b', ('c2b', 'csb'), 2), ('own_xy', ('b',), 2)),
+             'xz': (('own_xz', ('cxz', 'sxz', 'cyz', 'syz'), 2),)}
+_NAMES = [name for _, names, _ in _SUMS for name in names] + \
+    [name for sums in _OWN_SUMS.values() for _, names, _ in sums for name in names]
+_PROGRAMS = {}
+_LOCAL = threading.local()
 
 
 def _bounds(m, r, h):
     """Powers of two above the largest |term| of each sum, from max |m|, |R|, |z|."""
     slack = 1.0 + 2.0 ** -40            # products of rounded factors, |cos| ~ 1 + 2^-52
-    values = {'m': m, 'mx': m * r, 'my': m * r, 'mz': m * h, 'mxz': m * r * h,
-              'myz': m * r * h, 'mxy': m * r * r, 'mxx': m * r * r, 'myy': m * r * r,
-              'mzz': m * h * h}
-    return {name: dd.power_of_two_above(value * slack) for name, value in values.items()}
+    return {name: dd.power_of_two_above(value * slack) for name, value in (
+        ('m', m), ('mx', m * r), ('my', m * r), ('mz', m * h), ('mxz', m * r * h),
+        ('myz', m * r * h), ('mxy', m * r * r), ('mxx', m * r * r), ('myy', m * r * r),
+        ('mzz', m * h * h))}
+
+
+def _program(fast, own):
+    """The traced kernel of one block: angles reduced here or not; own-tensor terms."""
+    key = (fast, own)
+    if key not in _PROGRAMS:
+        t = dd.Tracer()
+        _trace_place(t, fast, own)
+        _PROGRAMS[key] = t.compile()
+    return _PROGRAMS[key]
+
+
+def _trace_place(t, fast, own):
+    """
+    One block's terms and their partial sums, every product exact (Dekker's on split
+    factors) up to its low-order parts.
+
+    ``own``: which own-tensor terms the block has, a tuple of 'own', 'd' (I_xx !=
+    I_yy), 'b' (I_xy), 'xz' (I_xz, I_yz); () for point masses.
+    """
+    mass, radius, z = (t.external(name) for name in ('mass', 'radius', 'z'))
+    if fast:
+        index, a, b = dd.trace_reduction(t, t.external('angle'))
+    else:
+        index, a, b = (t.external(name) for name in ('index', 'r_hi', 'r_lo'))
+    cs, cs_lo = dd.trace_cos_sin(t, index, a, b)             # rows cos, sin
+    m_p, r_p, z_p, cs_p = (dd.trace_split(t, v) for v in (mass, radius, z, cs))
+    # Centre of mass in the rotor frame, rows x = R cos, y = R sin.
+    xy, xy_lo = dd.trace_two_prod(t, cs, cs_p, radius, r_p)
+    xy_lo += cs_lo * radius
+    xy_p = dd.trace_split(t, xy)
+    # First moments, rows m x, m y, m z.
+    first, first_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, xy, xy_p, mass, m_p, out=(first[:2], first_lo[:2]))
+    first_lo[:2] += xy_lo * mass
+    dd.trace_two_prod(t, z, z_p, mass, m_p, out=(first[2], first_lo[2]))
+    first_p = dd.trace_split(t, first)
+
+    def row(parts, k):
+        return parts[0][k], parts[1][k]
+
+    # Second moments, rows m x z, m y z, m x y (either sign); m x x, m y y, m z z (positive).
+    products, products_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, first[:2], (first_p[0][:2], first_p[1][:2]), z, z_p,
+                      out=(products[:2], products_lo[:2]))
+    products_lo[:2] += first_lo[:2] * z
+    dd.trace_two_prod(t, first[0], row(first_p, 0), xy[1], row(xy_p, 1),
+                      out=(products[2], products_lo[2]))
+    products_lo[2] += first_lo[0] * xy[1]
+    products_lo[2] += first[0] * xy_lo[1]
+    squares, squares_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, first[:2], (first_p[0][:2], first_p[1][:2]), xy, xy_p,
+                      out=(squares[:2], squares_lo[:2]))
+    squares_lo[:2] += first_lo[:2] * xy
+    squares_lo[:2] += first[:2] * xy_lo
+    dd.trace_two_prod(t, first[2], row(first_p, 2), z, z_p, out=(squares[2], squares_lo[2]))
+    squares_lo[2] += first_lo[2] * z
+    terms = {'first': (first, first_lo), 'products': (products, products_lo),
+             'squares': (squares, squares_lo), 'mass': (mass[None], None)}
+    if own:
+        terms.update(_trace_own(t, own, cs, cs_lo, cs_p))
+    for group, names, levels in _SUMS + tuple(s for k in own for s in _OWN_SUMS[k]):
+        hi, lo = terms[group]
+        rows = len(names)
+        dd.trace_partial_sums(t, hi, lo, t.external('sigma_' + group, rows, (rows, levels)),
+                              levels, t.external('sums_' + group, rows, (rows, levels + 1)))
+
+
+def _trace_own(t, own, cs, cs_lo, cs_p):
+    """
+    The own tensors turned by theta (R I R^T): their terms, by sum group.
+
+    With d = I_xx - I_yy and b = I_xy (own frame): turned xx = I_yy + c^2 d - 2 c s b,
+    yy = I_xx - c^2 d + 2 c s b, xy = c s d + (2 c^2 - 1) b, xz = c I_xz - s I_yz,
+    yz = s I_xz + c I_yz, zz = I_zz.
+    """
+    block = t.external('own', 6)                # rows I_xx, I_yy, I_zz, I_xy, I_xz, I_yz
+    terms = {'own_diagonal': (block[:3], None)}
+    c, c_lo, c_p = cs[0], cs_lo[0], (cs_p[0][0], cs_p[1][0])
+    if 'd' in own or 'b' in own:
+        # c^2 and c s, double-double.
+        c2cs, c2cs_lo = dd.trace_two_prod(t, c, c_p, cs, cs_p)
+        c2cs_lo += c * cs_lo
+        c2cs_lo += c_lo * cs
+        c2cs_p = dd.trace_split(t, c2cs)
+    if 'd' in own:
+        d, d_lo = dd.trace_two_sum(t, block[0], -block[1])
+        product, product_lo = dd.trace_two_prod(t, c2cs, c2cs_p, d, dd.trace_split(t, d))
+        product_lo += c2cs_lo * d
+        product_lo += c2cs * d_lo
+        terms['own_d'] = (product, product_lo)
+    if 'b' in own:
+        b = block[3]
+        product, product_lo = dd.trace_two_prod(t, c2cs, c2cs_p, b, dd.trace_split(t, b))
+        product_lo += c2cs_lo * b
+        terms['own_b'] = (product, product_lo)
+        terms['own_xy'] = (block[3:4], None)
+    if 'xz' in own:
+        product, product_lo = t.new(4), t.new(4)          # rows c I_xz, s I_xz, c I_yz, s I_yz
+        for k, value in ((0, block[4]), (2, block[5])):
+            dd.trace_two_prod(t, cs, cs_p, value, dd.trace_split(t, value),
+                              out=(product[k:k + 2], product_lo[k:k + 2]))
+            product_lo[k:k + 2] += cs_lo * value
+        terms['own_xz'] = (product, product_lo)
+    return terms
 
 
 def _place_blocks(blocks, arrays, own, bounds, fast):
     """Partial sums of the aggregates' terms over some blocks (one worker's share)."""
-    sums = {name: [] for name in _SIGNED + _POSITIVE + _OWN_POSITIVE + _OWN_SIGNED}
-    s = dd.scratch()
+    sums = {name: [] for name in _NAMES}
+    cache = getattr(_LOCAL, 'programs', None)
+    if cache is None:
+        cache = _LOCAL.programs = {}
+        _LOCAL.inputs = {}
+    mass, radius, angle, z = arrays
+    sigmas = {}                          # block length -> group -> sigma (these bounds)
     for start, stop in blocks:
-        views = [a[start:stop] for a in arrays]
-        _place_block(*views, None if own is None else own[start:stop], bounds, fast, sums, s)
+        n = stop - start
+        inputs = _inputs(n)
+        for name, values in (('mass', mass), ('radius', radius), ('z', z)):
+            np.copyto(inputs[name], values[start:stop])
+        if fast:
+            np.copyto(inputs['angle'], angle[start:stop])
+        else:
+            index, inputs['r_hi'][:], inputs['r_lo'][:] = dd.reduce_angles(angle[start:stop])
+            inputs['index'].view(np.int64)[:] = index
+        kinds = ()
+        if own is not None:
+            block = inputs['own']
+            for row, (i, j) in zip(block, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+                np.copyto(row, own[start:stop, i, j])
+            kinds = ('own',) + tuple(kind for kind, present in (
+                ('d', (block[0] != block[1]).any()), ('b', block[3].any()),
+                ('xz', block[4].any() or block[5].any())) if present)
+            # Every own term is at most |I_xx - I_yy| <= 2 max |element|.
+            top = 2.0 * max(float(block.max()), -float(block.min())) * (1.0 + 2.0 ** -40)
+            own_bound = dd.power_of_two_above(top)
+        arrays_bound, run = dd.bound(cache, (fast, kinds, n), lambda: _program(fast, kinds),
+                                     inputs)
+        groups = _SUMS + tuple(s for k in kinds for s in _OWN_SUMS[k])
+        if n not in sigmas:
+            sigmas[n] = {group: dd.sigma_for(n, [bounds[name] for name in names], levels)
+                         for group, names, levels in _SUMS}
+        for group, names, levels in groups:
+            arrays_bound['sigma_' + group][:] = (
+                sigmas[n][group] if group in sigmas[n]
+                else dd.sigma_for(n, [own_bound] * len(names), levels))
+        run()
+        for group, names, levels in groups:
+            for name, row in zip(names, arrays_bound['sums_' + group].tolist()):
+                sums[name] += row
     return sums
 
 
-def _place_block(mass, radius, angle, z, own, bounds, fast, sums, s):
-    """
-    Add one block's partial sums (floats whose exact sum is the block's sum) to sums.
-
-    Every product is exact (Dekker's two-product on split factors) up to its
-    low-order parts; rows of stacked arrays share each numpy call. s: the scratch.
-    """
-    n = mass.size
-
-    def rows(name, k):
-        return s(name, n, rows=k)
-
-    def parts(value, name):
-        k = None if value.ndim == 1 else value.shape[0]
-        hi, lo = s(name + '_1', n, rows=k), s(name + '_2', n, rows=k)
-        dd.split_into(value, hi, lo)
-        return hi, lo
-
-    cs, cs_lo = dd.cos_sin_into(angle, s, fast)         # rows cos, sin
-    w = rows('work', 6)
-    m_p, r_p, z_p, cs_p = parts(mass, 'm'), parts(radius, 'R'), parts(z, 'z'), parts(cs, 'cs')
-    # Centre of mass in the rotor frame, rows x = R cos, y = R sin.
-    xy, xy_lo = rows('xy', 2), rows('xy_lo', 2)
-    dd.two_prod_into(cs, cs_p, radius, r_p, xy, xy_lo, w[:2])
-    dd.add_product(xy_lo, cs_lo, radius, w[:2])
-    xy_p = parts(xy, 'xy')
-    # First moments, rows m x, m y, m z; the second moments from them.
-    first, first_lo = rows('first', 3), rows('first_lo', 3)
-    dd.two_prod_into(xy, xy_p, mass, m_p, first[:2], first_lo[:2], w[:2])
-    dd.add_product(first_lo[:2], xy_lo, mass, w[:2])
-    dd.two_prod_into(z, z_p, mass, m_p, first[2], first_lo[2], w[0])
-    first_p = parts(first, 'first')
-    # Rows m x z, m y z, m x y (either sign), m x x, m y y, m z z (positive).
-    second, second_lo = rows('second', 6), rows('second_lo', 6)
-    dd.two_prod_into(first[:2], (first_p[0][:2], first_p[1][:2]), z, z_p,
-                     second[:2], second_lo[:2], w[:2])
-    dd.add_product(second_lo[:2], first_lo[:2], z, w[:2])
-    dd.two_prod_into(first[0], (first_p[0][0], first_p[1][0]), xy[1], (xy_p[0][1], xy_p[1][1]),
-                     second[2], second_lo[2], w[0])
-    dd.add_product(second_lo[2], first_lo[0], xy[1], w[0])
-    dd.add_product(second_lo[2], first[0], xy_lo[1], w[0])
-    dd.two_prod_into(first[:2], (first_p[0][:2], first_p[1][:2]), xy, xy_p,
-                     second[3:5], second_lo[3:5], w[:2])
-    dd.add_product(second_lo[3:5], first_lo[:2], xy, w[:2])
-    dd.add_product(second_lo[3:5], first[:2], xy_lo, w[:2])
-    dd.two_prod_into(first[2], (first_p[0][2], first_p[1][2]), z, z_p,
-                     second[5], second_lo[5], w[0])
-    dd.add_product(second_lo[5], first_lo[2], z, w[0])
-    rest = rows('rest', 6)
-    _add_sums(sums, ('mx', 'my', 'mz'), first, first_lo, bounds, 2, w[:3], rest[:3])
-    _add_sums(sums, ('mxz', 'myz', 'mxy'), second[:3], second_lo[:3], bounds, 2, w[:3],
-              rest[:3])
-    _add_sums(sums, ('mxx', 'myy', 'mzz'), second[3:], second_lo[3:], bounds, 1, w[:3],
-              rest[:3])
-    _add_sums(sums, ('m',), mass[None], None, bounds, 1, w[:1], rest[:1])
-    if own is not None:
-        _own_block(own, cs, cs_lo, cs_p, s, sums)
-
-
-def _add_sums(sums, names, hi, lo, bounds, levels, work, rest):
-    """Append the rows' partial sums to sums[name] (bounds: a dict or one bound)."""
-    row_bounds = [bounds[name] if isinstance(bounds, dict) else bounds for name in names]
-    for name, values in zip(names, dd.partial_sums_into(hi, lo, row_bounds, levels, work,
-                                                        rest)):
-        sums[name].extend(values.tolist())
-
-
-def _own_block(own, cs, cs_lo, cs_p, s, sums):
-    """
-    The own tensors turned by theta (R I R^T), element sums added to sums.
-
-    With d = I_xx - I_yy and b = I_xy (own frame): turned xx = I_yy + c^2 d - 2 c s b,
-    yy = I_xx - c^2 d + 2 c s b, xy = c s d + (2 c^2 - 1) b, xz = c I_xz - s I_yz,
-    yz = s I_xz + c I_yz, zz = I_zz. Terms that are zero in the whole block are skipped.
-    """
-    n = own.shape[0]
-
-    def rows(name, k):
-        return s(name, n, rows=k)
-
-    block = rows('own', 6)              # rows I_xx, I_yy, I_zz, I_xy, I_xz, I_yz
-    for row, (i, j) in zip(block, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
-        np.copyto(row, own[:, i, j])
-    w, rest = rows('work', 8), rows('rest', 8)
-    # Every term is at most |I_xx - I_yy| <= 2 max |element|.
-    top = max(float(np.max(block)), -float(np.min(block)))
-    bound = dd.power_of_two_above(2.0 * top * (1.0 + 2.0 ** -40))
-    _add_sums(sums, _OWN_POSITIVE, block[:3], None, bound, 1, w[:3], rest[:3])
-    c, c_lo, c_p = cs[0], cs_lo[0], (cs_p[0][0], cs_p[1][0])
-    terms, terms_lo = rows('own_terms', 8), rows('own_terms_lo', 8)
-    names = []
-    d, d_lo = rows('d', 2)
-    dd.two_sum_into(block[0], block[1], d, d_lo, w[0], subtract=True)
-    b = block[3]
-    has_d, has_b = bool(np.any(d)), bool(np.any(b))
-    if has_d or has_b:
-        # c^2 and c s, double-double.
-        c2cs, c2cs_lo = rows('c2cs', 2), rows('c2cs_lo', 2)
-        dd.two_prod_into(c, c_p, cs, cs_p, c2cs, c2cs_lo, w[:2])
-        dd.add_product(c2cs_lo, c, cs_lo, w[:2])
-        dd.add_product(c2cs_lo, c_lo, cs, w[:2])
-        c2cs_p = (rows('c2cs_1', 2), rows('c2cs_2', 2))
-        dd.split_into(c2cs, *c2cs_p)
-        k = 0
-        for value, value_lo, value_names in ((d, d_lo, ('c2d', 'csd')), (b, None, ('c2b', 'csb'))):
-            if not np.any(value):
-                continue
-            value_p = (rows('own_1', 1)[0], rows('own_2', 1)[0])
-            dd.split_into(value, *value_p)
-            dd.two_prod_into(c2cs, c2cs_p, value, value_p, terms[k:k + 2], terms_lo[k:k + 2],
-                             w[:2])
-            dd.add_product(terms_lo[k:k + 2], c2cs_lo, value, w[:2])
-            if value_lo is not None:
-                dd.add_product(terms_lo[k:k + 2], c2cs, value_lo, w[:2])
-            names += value_names
-            k += 2
-        if has_b:
-            _add_sums(sums, ('b',), b[None], None, bound, 2, w[:1], rest[:1])
-    oxz, oyz = block[4], block[5]
-    if np.any(oxz) or np.any(oyz):
-        for value, value_names in ((oxz, ('cxz', 'sxz')), (oyz, ('cyz', 'syz'))):
-            k = len(names)
-            value_p = (rows('own_1', 1)[0], rows('own_2', 1)[0])
-            dd.split_into(value, *value_p)
-            dd.two_prod_into(cs, cs_p, value, value_p, terms[k:k + 2], terms_lo[k:k + 2],
-                             w[:2])
-            dd.add_product(terms_lo[k:k + 2], cs_lo, value, w[:2])
-            names += value_names
-    if names:
-        k = len(names)
-        _add_sums(sums, names, terms[:k], terms_lo[:k], bound, 2, w[:k], rest[:k])
+def _inputs(n):
+    """This thread's input arrays for blocks of n components (shared by the programs)."""
+    inputs = _LOCAL.inputs
+    if n not in inputs:
+        if len(inputs) > 4:
+            inputs.pop(next(iter(inputs)))
+        inputs[n] = {name: np.empty((rows, n)) if rows else np.empty(n) for name, rows in (
+            ('mass', None), ('radius', None), ('z', None), ('angle', None), ('index', None),
+            ('r_hi', None), ('r_lo', None), ('own', 6))}
+    return inputs[n]
 
 
 def _assemble(partials):
     """MassProperties from the workers' partial sums: each aggregate one math.fsum."""
-    sums = {name: [v for part in partials for v in part[name]] for name in partials[0]}
+    sums = {name: [v for part in partials for v in part[name]] for name in _NAMES}
 
     def total(*terms):
         return math.fsum(sign * v for sign, name in terms for v in sums[name])
