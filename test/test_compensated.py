@@ -292,3 +292,53 @@ def test_small_layouts_and_edge_cases():
             for j in range(3):
                 assert abs(one.inertia[i, j] - want[i, j]) <= 2.3e-16 * abs(want[i, j])
     assert np.isnan(place([1.0, np.nan], None, [0.5, 0.2], [0.1, 0.2], [0.0, 0.1]).mass)
+
+
+def exact_place(mass, own, radius, angle, z):
+    """mass, S and the tensor of elements, term by term in 40-digit mpmath."""
+    with mp.workdps(40):
+        total_mass, first, tensor = mp.mpf(0), [mp.mpf(0)] * 3, mp.zeros(3, 3)
+        for k in range(len(mass)):
+            m, c, s = mp.mpf(mass[k]), mp.cos(mp.mpf(angle[k])), mp.sin(mp.mpf(angle[k]))
+            r = [mp.mpf(radius[k]) * c, mp.mpf(radius[k]) * s, mp.mpf(z[k])]
+            turn = mp.matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+            inertia = (turn * mp.matrix(own[k].tolist()) * turn.T if own is not None
+                       else mp.zeros(3, 3))
+            total_mass += m
+            for i in range(3):
+                first[i] += m * r[i]
+                for j in range(3):
+                    inertia[i, j] += m * ((r[0] ** 2 + r[1] ** 2 + r[2] ** 2 if i == j else 0)
+                                          - r[i] * r[j])
+            tensor += inertia
+        return total_mass, first, tensor
+
+
+def test_many_layouts_in_a_row_each_rounded_right():
+    """
+    Layouts of 28 sizes and three kinds one after another, each size twice (blocks
+    of many lengths, their arrays and programs made, dropped and made again), each
+    against a 40-digit sum term by term.
+    """
+    rng = np.random.default_rng(15)
+    sizes = np.concatenate([np.arange(1, 26), [100, 300, 1000]])
+    for n in np.concatenate([rng.permutation(sizes), rng.permutation(sizes)]):
+        kind = ('points', 'shapes', 'products')[n % 3]
+        mass, radius = rng.uniform(0.1, 60, n), rng.uniform(0, 0.8, n)
+        angle, z = rng.uniform(-7, 7, n), rng.uniform(-0.3, 0.3, n)
+        own = None
+        if kind != 'points':
+            own = np.zeros((n, 3, 3))
+            own[:, [0, 1, 2], [0, 1, 2]] = rng.uniform(0.01, 2, (n, 3))
+            if kind == 'products':
+                for i, j in ((0, 1), (0, 2), (1, 2)):
+                    own[:, i, j] = own[:, j, i] = rng.uniform(-0.005, 0.005, n)
+        body = place(mass, own, radius, angle, z)
+        want_mass, want_first, want_tensor = exact_place(mass, own, radius, angle, z)
+        got = [body.mass, *body.first_moment, *body.inertia.ravel()]
+        want = [want_mass, *want_first, *(want_tensor[i, j] for i in range(3)
+                                          for j in range(3))]
+        for value, exact in zip(got, want):
+            # Correctly rounded: within half an ulp (measured: all).
+            assert abs(mp.mpf(float(value)) - exact) <= np.spacing(abs(float(exact))) / 2, \
+                (n, kind)

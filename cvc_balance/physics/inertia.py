@@ -259,15 +259,11 @@ def _trace_own(t, own, cs, cs_lo, cs_p):
 def _place_blocks(blocks, arrays, own, bounds, fast):
     """Partial sums of the aggregates' terms over some blocks (one worker's share)."""
     sums = {name: [] for name in _NAMES}
-    cache = getattr(_LOCAL, 'programs', None)
-    if cache is None:
-        cache = _LOCAL.programs = {}
-        _LOCAL.inputs = {}
     mass, radius, angle, z = arrays
     sigmas = {}                          # block length -> group -> sigma (these bounds)
     for start, stop in blocks:
         n = stop - start
-        inputs = _inputs(n)
+        inputs, programs = _inputs(n)
         for name, values in (('mass', mass), ('radius', radius), ('z', z)):
             np.copyto(inputs[name], values[start:stop])
         if fast:
@@ -286,7 +282,7 @@ def _place_blocks(blocks, arrays, own, bounds, fast):
             # Every own term is at most |I_xx - I_yy| <= 2 max |element|.
             top = 2.0 * max(float(block.max()), -float(block.min())) * (1.0 + 2.0 ** -40)
             own_bound = dd.power_of_two_above(top)
-        arrays_bound, run = dd.bound(cache, (fast, kinds, n), lambda: _program(fast, kinds),
+        arrays_bound, run = dd.bound(programs, (fast, kinds, n), lambda: _program(fast, kinds),
                                      inputs)
         groups = _SUMS + tuple(s for k in kinds for s in _OWN_SUMS[k])
         if n not in sigmas:
@@ -304,15 +300,22 @@ def _place_blocks(blocks, arrays, own, bounds, fast):
 
 
 def _inputs(n):
-    """This thread's input arrays for blocks of n components (shared by the programs)."""
-    inputs = _LOCAL.inputs
-    if n not in inputs:
-        if len(inputs) > 4:
-            inputs.pop(next(iter(inputs)))
-        inputs[n] = {name: np.empty((rows, n)) if rows else np.empty(n) for name, rows in (
+    """
+    This thread's input arrays for blocks of n components, shared by the programs
+    bound to them (a dict, also returned), for the few most recent n.
+    """
+    cache = getattr(_LOCAL, 'inputs', None)
+    if cache is None:
+        cache = _LOCAL.inputs = {}
+    if n in cache:
+        cache[n] = cache.pop(n)                     # most recent last
+    else:
+        while len(cache) >= 4:
+            cache.pop(next(iter(cache)))            # with the programs bound to them
+        cache[n] = ({name: np.empty((rows, n)) if rows else np.empty(n) for name, rows in (
             ('mass', None), ('radius', None), ('z', None), ('angle', None), ('index', None),
-            ('r_hi', None), ('r_lo', None), ('own', 6))}
-    return inputs[n]
+            ('r_hi', None), ('r_lo', None), ('own', 6))}, {})
+    return cache[n]
 
 
 def _assemble(partials):
