@@ -233,7 +233,7 @@ def _tables():
 
 # --- Straight-line kernels, traced once and run block after block.
 
-BLOCK = 8192
+BLOCK = 16384
 """Elements per block of the vectorised kernels (their working arrays stay in cache)."""
 
 
