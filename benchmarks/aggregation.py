@@ -1,8 +1,8 @@
 """
 Exact aggregation of a layout: time per layout size, before and after, and cos/sin error.
 
-Prints, for 10, 10^3, 10^5 and 10^6 components (point masses, and bodies with own
-inertia tensors: boxes and radial cylinders, a third with products of inertia), the
+Prints, for 10, 10^3, 10^5 and 10^6 components (point masses; bodies of the parametric
+shapes; bodies of given inertia tensors with products of inertia), the
 time of :func:`cvc_balance.physics.inertia.place` (the layout reduced to its exact
 aggregates, double-double), best of several runs, wall-clock and CPU time of all
 threads; the same for the code at a git revision ("before", in a child process on the
@@ -27,14 +27,21 @@ import time
 import numpy as np
 
 SIZES = (10, 1_000, 100_000, 1_000_000)
-KINDS = ('points', 'shapes')
+KINDS = ('points', 'shapes', 'tensors')
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 DEFAULT_BEFORE = '49574c3'           # the last commit with the Taylor-series double-double
 
 
 def layout_arrays(n, kind, seed=0):
-    """Masses, own tensors (or None), radii, angles and z of n random components."""
+    """
+    Masses, own tensors (or None), radii, angles and z of n random components.
+
+    ``kind``: 'points'; 'shapes', the parametric shapes in turn (box, solid cylinder
+    along each axis, tube, sphere, point: own tensors diagonal in the own frame);
+    'tensors', given inertia tensors with products of inertia (a box turned in its
+    own frame), the most work.
+    """
     rng = np.random.default_rng(seed)
     mass = rng.uniform(0.1, 60.0, n)
     radius = rng.uniform(0.0, 0.8, n)
@@ -42,21 +49,29 @@ def layout_arrays(n, kind, seed=0):
     z = rng.uniform(-0.3, 0.3, n)
     if kind == 'points':
         return mass, None, radius, angle, z
-    own = np.zeros((n, 3, 3))
     a, b, c = (rng.uniform(0.02, 0.4, n) for _ in range(3))
-    box = np.arange(n) % 3 == 0
-    own[box, 0, 0] = mass[box] * (b[box] ** 2 + c[box] ** 2) / 12
-    own[box, 1, 1] = mass[box] * (a[box] ** 2 + c[box] ** 2) / 12
-    own[box, 2, 2] = mass[box] * (a[box] ** 2 + b[box] ** 2) / 12
-    cylinder = np.arange(n) % 3 == 1                 # axis radial: I_xx = m r^2 / 2
-    own[cylinder, 0, 0] = 0.5 * mass[cylinder] * a[cylinder] ** 2
-    own[cylinder, 1, 1] = own[cylinder, 2, 2] = \
-        mass[cylinder] * (3 * a[cylinder] ** 2 + b[cylinder] ** 2) / 12
-    turned = np.arange(n) % 3 == 2                   # a box turned in its own frame
-    for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
-        own[turned, i, j] = own[turned, j, i] = 0.01 * mass[turned] * a[turned] * (k + 1)
-    for i in range(3):
-        own[turned, i, i] = mass[turned] * 0.05
+    own = np.zeros((n, 3, 3))
+    if kind == 'tensors':
+        size = np.stack([a, b, c], 1)
+        box = mass[:, None] * (size.sum(1, keepdims=True) ** 2 - size ** 2) / 12
+        turn = np.linalg.qr(rng.normal(size=(n, 3, 3)))[0]
+        return mass, np.einsum('nij,nj,nkj->nik', turn, box, turn), radius, angle, z
+    kind_of = np.arange(n) % 6
+    along, across = 0.5 * mass * a ** 2, mass * (3 * a ** 2 + b ** 2) / 12
+    for k in range(3):                               # cylinders along x, y, z
+        take = kind_of == k
+        own[take] = np.eye(3) * across[take, None, None]
+        own[take, k, k] = along[take]
+    take = kind_of == 3                              # boxes
+    own[take, 0, 0] = mass[take] * (b[take] ** 2 + c[take] ** 2) / 12
+    own[take, 1, 1] = mass[take] * (a[take] ** 2 + c[take] ** 2) / 12
+    own[take, 2, 2] = mass[take] * (a[take] ** 2 + b[take] ** 2) / 12
+    take = kind_of == 4                              # tubes along z
+    own[take] = np.eye(3) * (mass[take] * (3 * (a[take] ** 2 + b[take] ** 2) + c[take] ** 2)
+                             / 12)[:, None, None]
+    own[take, 2, 2] = 0.5 * mass[take] * (a[take] ** 2 + b[take] ** 2)
+    take = kind_of == 5                              # spheres
+    own[take] = np.eye(3) * (0.4 * mass[take] * a[take] ** 2)[:, None, None]
     return mass, own, radius, angle, z
 
 
