@@ -143,6 +143,27 @@ def measure(sizes, kinds, angles, slow):
     return result
 
 
+def block_time(kind, repeats=300):
+    """
+    Best time of one block of the kernel (single thread), s per component.
+
+    On a shared machine the best of many ~2 ms runs is one that nobody interrupted:
+    times 10^6, what one idle core takes for 10^6 components.
+    """
+    from cvc_balance.physics import compensated, inertia
+    n = compensated.BLOCK
+    mass, own, radius, angle, z = layout_arrays(64 * n, kind)
+    arrays = [mass, radius, angle, z]
+    bounds = inertia._bounds(mass.max(), radius.max(), np.abs(z).max())
+    best = math.inf
+    for k in range(repeats):
+        block = [((k % 64) * n, (k % 64 + 1) * n)]
+        start = time.perf_counter()
+        inertia._place_blocks(block, arrays, own, bounds, True)
+        best = min(best, time.perf_counter() - start)
+    return best / n
+
+
 def measure_before(revision, sizes, kinds, angles):
     """The same measurements on the code at ``revision``, in a child process."""
     with tempfile.TemporaryDirectory() as folder:
@@ -233,6 +254,9 @@ def main():
             ratio = f'{then[0] / now[0]:9.1f}x' if then else ''
             print(f'{n:>10}  {kind:6}  {milliseconds(then) if then else "":>24}  '
                   f'{milliseconds(now):>24}  {ratio:>10}')
+    print('one core, uncontended (best of 300 blocks of the kernel, times 10^6): '
+          + ', '.join(f'{kind} {block_time(kind) * 1e9:.0f} ms' for kind in args.kinds)
+          + ' for 10^6 components')
     for k, span in enumerate(('|angle| <= 1e9', 'all, to 1.8e308')):
         line = (f'cos/sin against 60-digit mpmath, {angles.size} angles (random at every '
                 f'scale and hard cases), {span}: largest |error| after '
