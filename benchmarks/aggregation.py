@@ -130,7 +130,7 @@ def repeats_for(n, slow):
 
 
 def measure(sizes, kinds, angles, slow):
-    """This process's place() timings and cos/sin error, as a dict."""
+    """Measure this process's place() timings and cos/sin error: a dict."""
     from cvc_balance.physics import inertia
     place = inertia.place
     result = {'times': {}, 'cos_sin_error': cos_sin_error(angles), 'source': inertia.__file__}
@@ -165,7 +165,7 @@ def block_time(kind, repeats=300):
 
 
 def measure_before(revision, sizes, kinds, angles):
-    """The same measurements on the code at ``revision``, in a child process."""
+    """Measure the same on the code at ``revision``, in a child process."""
     with tempfile.TemporaryDirectory() as folder:
         archive = subprocess.run(['git', '-C', ROOT, 'archive', revision, 'cvc_balance'],
                                  check=True, capture_output=True).stdout
@@ -199,7 +199,7 @@ def instructions(source, n, kind):
 
 
 def count_run(n, kind, run):
-    """The child under callgrind: make the arrays, aggregate 100 (and n if ``run``)."""
+    """Run the child under callgrind: make the arrays, aggregate 100 (and n if ``run``)."""
     from cvc_balance.physics.inertia import place
     arrays = layout_arrays(n, kind)
     place(*layout_arrays(100, kind))

@@ -42,7 +42,7 @@ def cos_sin_errors(angles):
 
 
 def neighbours(values, ulps=2):
-    """The values and the floats up to ``ulps`` steps either side of each."""
+    """Return the values and the floats up to ``ulps`` steps either side of each."""
     values = np.asarray(values, dtype=float)
     out = [values]
     up, down = values.copy(), values.copy()
@@ -316,6 +316,8 @@ def exact_place(mass, own, radius, angle, z):
 
 def test_many_layouts_in_a_row_each_rounded_right():
     """
+    Aggregate layouts of 28 sizes and three kinds, each size twice, in a row.
+
     Layouts of 28 sizes and three kinds one after another, each size twice (blocks
     of many lengths, their arrays and programs made, dropped and made again), each
     against a 40-digit sum term by term.

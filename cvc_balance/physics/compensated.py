@@ -153,7 +153,7 @@ def _atan_of_inverse(k, bits):
 
 
 def _pi_fixed(bits):
-    """pi * 2^bits to within a few units (Machin's formula, 16 guard bits)."""
+    """Return pi * 2^bits to within a few units (Machin's formula, 16 guard bits)."""
     guard = bits + 16
     return (4 * (4 * _atan_of_inverse(5, guard) - _atan_of_inverse(239, guard))) >> 16
 
@@ -254,12 +254,16 @@ class Ref:
     __slots__ = ('tracer', 'base', 'path', 'rows')
 
     def __init__(self, tracer, base, path, rows):
-        """A view ``path`` (indexing keys, or 'int' for an int64 view) of ``base``."""
+        """Make the view ``path`` (indexing keys, or 'int': as int64) of ``base``."""
         self.tracer, self.base, self.path, self.rows = tracer, base, path, rows
 
     def __getitem__(self, key):
-        """Rows of a stacked array: an int (one row), a slice, None (a new axis), or a
-        tuple (rows first) for the caller's small arrays."""
+        """
+        Select rows of a stacked array.
+
+        ``key``: an int (one row), a slice, None (a new axis), or a tuple (rows
+        first) for the caller's small arrays.
+        """
         first = key[0] if isinstance(key, tuple) else key
         if first is None:
             rows = 1
@@ -276,7 +280,7 @@ class Ref:
             raise TypeError('assign to a traced array with Tracer.call')
 
     def bits(self):
-        """The same memory seen as int64."""
+        """Return the same memory seen as int64."""
         return Ref(self.tracer, self.base, self.path + ('int',), self.rows)
 
     def _binary(self, function, other, swap=False):
@@ -329,22 +333,24 @@ class Tracer:
     """
 
     def __init__(self):
-        """An empty program."""
+        """Start an empty program."""
         self.ops = []
         self.rows = []               # internal arrays: rows (None: one row, 1-D)
         self.span = []               # [first, last] op using each internal array
         self.externals = {}          # name -> rows; bound to the caller's arrays
 
     def new(self, rows=None):
-        """A fresh internal array of n (or rows x n) elements."""
+        """Return a fresh internal array of n (or rows x n) elements."""
         self.rows.append(rows)
         self.span.append([len(self.ops), len(self.ops)])
         return Ref(self, len(self.rows) - 1, (), rows)
 
     def external(self, name, rows=None, shape=None):
         """
-        An array the caller binds (inputs, results): n or (rows, n) elements, or of
-        ``shape`` (small arrays: sums, sigmas); read and written in place.
+        Return an array the caller binds: inputs, results.
+
+        n or (rows, n) elements, or of ``shape`` (small arrays: sums, sigmas);
+        read and written in place.
         """
         self.externals[name] = shape or rows
         return Ref(self, name, (), rows)
@@ -364,13 +370,8 @@ class Tracer:
         self.call(function, *args, out)
         return out
 
-    def keep(self, *refs):
-        """Keep internal arrays alive to the end (results read after a run)."""
-        for ref in refs:
-            self.span[ref.base][1] = len(self.ops) + 1
-
     def compile(self):
-        """The :class:`Program`: internal arrays laid out in rows by liveness."""
+        """Return the :class:`Program`, its internal arrays laid out by liveness."""
         free_after = []              # per row: the last op of its current array
         start = [0] * len(self.rows)
         for base in sorted(range(len(self.rows)), key=lambda b: self.span[b][0]):
@@ -494,7 +495,7 @@ def trace_partial_sums(t, hi, lo, sigma, levels, sums):
 
 def sigma_for(n, bounds, levels):
     """
-    The (rows, levels) sigma of :func:`trace_partial_sums` for blocks of n elements.
+    Return the (rows, levels) sigma of :func:`trace_partial_sums` for blocks of n.
 
     ``bounds``: powers of two >= max |term| of each row, below 2^960.
     """
@@ -648,7 +649,7 @@ def bound(cache, key, program, shared=None):
 
 
 def _cos_sin_program(fast):
-    """The cos/sin program: from angles (fast) or from reduced angles."""
+    """Return the cos/sin program: from angles (fast) or from reduced angles."""
     if fast not in _COS_SIN:
         t = Tracer()
         if fast:

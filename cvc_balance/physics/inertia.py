@@ -152,7 +152,7 @@ def _bounds(m, r, h):
 
 
 def _program(fast, own):
-    """The traced kernel of one block: angles reduced here or not; own-tensor terms."""
+    """Return the kernel of one block: angles reduced in it or not; own-tensor terms."""
     key = (fast, own)
     if key not in _PROGRAMS:
         t = dd.Tracer()
@@ -163,8 +163,9 @@ def _program(fast, own):
 
 def _trace_place(t, fast, own):
     """
-    One block's terms and their partial sums, every product exact (Dekker's on split
-    factors) up to its low-order parts.
+    Trace one block's terms and their partial sums.
+
+    Every product is exact (Dekker's on split factors) up to its low-order parts.
 
     ``own``: which own-tensor terms the block has, a tuple of 'own', 'd' (I_xx !=
     I_yy), 'b' (I_xy), 'xz' (I_xz, I_yz); () for point masses.
@@ -219,7 +220,7 @@ def _trace_place(t, fast, own):
 
 def _trace_own(t, own, cs, cs_lo, cs_p):
     """
-    The own tensors turned by theta (R I R^T): their terms, by sum group.
+    Trace the own tensors turned by theta (R I R^T): their terms, by sum group.
 
     With d = I_xx - I_yy and b = I_xy (own frame): turned xx = I_yy + c^2 d - 2 c s b,
     yy = I_xx - c^2 d + 2 c s b, xy = c s d + (2 c^2 - 1) b, xz = c I_xz - s I_yz,
@@ -301,8 +302,9 @@ def _place_blocks(blocks, arrays, own, bounds, fast):
 
 def _inputs(n):
     """
-    This thread's input arrays for blocks of n components, shared by the programs
-    bound to them (a dict, also returned), for the few most recent n.
+    Return this thread's input arrays for blocks of n, and the programs bound to them.
+
+    Shared by the kernel's variants; the few most recent n are kept.
     """
     cache = getattr(_LOCAL, 'inputs', None)
     if cache is None:
@@ -319,7 +321,7 @@ def _inputs(n):
 
 
 def _assemble(partials):
-    """MassProperties from the workers' partial sums: each aggregate one math.fsum."""
+    """Add up the workers' partial sums: each aggregate one math.fsum."""
     sums = {name: [v for part in partials for v in part[name]] for name in _NAMES}
 
     def total(*terms):
