@@ -643,7 +643,7 @@ def bound(cache, key, program, shared=None):
                      else np.empty((size, n)) if size else np.empty(n))
               for name, size in compiled.externals.items()}
     cache[key] = (arrays, compiled.bind(n, arrays))
-    while len(cache) > 16:
+    while len(cache) > 8:
         cache.pop(next(iter(cache)))
     return cache[key]
 
