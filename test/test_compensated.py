@@ -344,3 +344,30 @@ def test_many_layouts_in_a_row_each_rounded_right():
             # Correctly rounded: within half an ulp (measured: all).
             assert abs(mp.mpf(float(value)) - exact) <= np.spacing(abs(float(exact))) / 2, \
                 (n, kind)
+
+
+def test_aggregations_at_once_from_any_threads_agree_bit_for_bit():
+    """
+    Aggregate in the pool's threads and others at once: the same bits as alone.
+
+    Layouts aggregated off the input path run in workers.pool()'s threads: place() must
+    not wait there for the pool (both busy: for ever), nor mix threads' arrays.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+    from cvc_balance.physics.workers import pool
+    rng = np.random.default_rng(16)
+    layouts = []
+    for n in (70_000, 50_001):                      # several blocks: threaded when it may
+        own = np.zeros((n, 3, 3))
+        own[:, [0, 1, 2], [0, 1, 2]] = rng.uniform(0.01, 2, (n, 3))
+        layouts.append((rng.uniform(1, 2, n), own, rng.uniform(0, 1, n),
+                        rng.uniform(-1e3, 1e3, n), rng.uniform(-1, 1, n)))
+    alone = [place(*layout) for layout in layouts]
+    with ThreadPoolExecutor(2) as others:
+        jobs = [executor.submit(place, *layouts[k % 2]) for k in range(8)
+                for executor in (pool(), others)]
+        for k, job in enumerate(jobs):
+            got, want = job.result(timeout=120), alone[(k // 2) % 2]
+            assert got.mass == want.mass
+            assert np.array_equal(got.first_moment, want.first_moment)
+            assert np.array_equal(got.inertia, want.inertia)

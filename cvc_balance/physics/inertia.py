@@ -112,20 +112,21 @@ def place(mass, inertia_own, radius, angle, z):
     fast = top[2] <= dd.cos_sin_fast_limit()
     bounds = _bounds(top[0], top[1], top[3])
     blocks = [(start, min(start + dd.BLOCK, n)) for start in range(0, n, dd.BLOCK)]
-    # A few blocks are done sooner here than handed over (and waited for) on a busy machine.
-    workers = (os.cpu_count() or 1) if len(blocks) >= _THREADED_BLOCKS else 1
+    # A few blocks are done sooner here than handed over (and waited for) on a busy machine;
+    # in a worker thread (a layout aggregated off the input path) too: waiting there for
+    # other workers could wait for ever.
+    in_worker = threading.current_thread().name.startswith(_WORKER_THREADS)
+    workers = (os.cpu_count() or 1) if len(blocks) >= _THREADED_BLOCKS and not in_worker else 1
     share = max(-(-len(blocks) // workers), 1)
-    shares = [blocks[k:k + share] for k in range(0, len(blocks), share)]
-    if len(shares) <= 1:
-        partials = [_place_blocks(blocks, arrays, own, bounds, fast)]
-    else:
-        jobs = [pool().submit(_place_blocks, part, arrays, own, bounds, fast)
-                for part in shares]
-        partials = [job.result() for job in jobs]
-    return _assemble(partials)
+    shares = [blocks[k:k + share] for k in range(0, len(blocks), share)] or [[]]
+    jobs = [pool().submit(_place_blocks, part, arrays, own, bounds, fast)
+            for part in shares[1:]]
+    partials = [_place_blocks(shares[0], arrays, own, bounds, fast)]   # this thread's share
+    return _assemble(partials + [job.result() for job in jobs])
 
 
 _THREADED_BLOCKS = 4
+_WORKER_THREADS = 'cvc_worker'           # the names of workers.pool()'s threads
 
 # The sums, by the rows of the kernel's arrays they come from; levels of extraction:
 # two for terms of either sign (summed to ~2^-100 of sum |terms|), one for terms of one
