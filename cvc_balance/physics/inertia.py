@@ -14,11 +14,15 @@ Units: kg, m, kg m, kg m^2. Tensors hold tensor elements (see
 """
 
 from dataclasses import dataclass
+import math
+import os
+import threading
 
 import numpy as np
 
 from cvc_balance.physics import compensated as dd
 from cvc_balance.physics.frames import tensor_from_elements
+from cvc_balance.physics.workers import in_pool, pool
 
 SHAPE_AXES = ('radial', 'tangential', 'axial')
 """Directions a shape's symmetry axis can take, own-frame x, y, z."""
@@ -87,57 +91,253 @@ def place(mass, inertia_own, radius, angle, z):
     (radial, tangential, axial) frame, shape (n, 3, 3) (or (3, 3) for one),
     or None for point masses;
     ``mass``, ``radius`` (m), ``angle`` (rad) and ``z`` (m) are (n,) or
-    scalars. Vectorised: the cost is a few numpy calls whatever n is.
+    scalars. Vectorised in blocks of :data:`compensated.BLOCK` components, shared
+    between this thread and :func:`workers.pool`'s (numpy releases the GIL); all in
+    this thread when it is itself one of the pool's. ~0.1 s for 10^6 components on
+    one core (``benchmarks/aggregation.py``).
 
     The terms are those of :func:`parallel_axis_cvc` (the own tensor turned by
-    theta, plus the shift), evaluated and summed in double-double
-    (:mod:`cvc_balance.physics.compensated`): each aggregate is within an ulp or so of
-    the exact sum for the given numbers, so a layout balanced to 1e-9 of its mass
-    moment keeps its residual unbalance to ~1e-16, not ~1e-7.
+    theta, plus the shift), each evaluated to ~2^-100 of itself in double-double
+    and summed exactly (:mod:`cvc_balance.physics.compensated`): each aggregate is
+    its exact value for the given numbers, rounded (unless it cancels below ~1e-17
+    of its terms: then within ~1e-32 of them), so a layout balanced to 1e-9 of its
+    mass moment keeps its residual unbalance to ~1e-16, not ~1e-7.
     """
     mass = np.atleast_1d(np.asarray(mass, dtype=float))
-    radius = np.broadcast_to(np.asarray(radius, dtype=float), mass.shape)
-    angle = np.broadcast_to(np.asarray(angle, dtype=float), mass.shape)
-    z = np.broadcast_to(np.asarray(z, dtype=float), mass.shape)
-    c, s = dd.cos_sin(angle)
-    x, y = dd.scale(c, radius), dd.scale(s, radius)          # centre of mass, rotor frame
-    first = [dd.scale(x, mass), dd.scale(y, mass), dd.two_prod(mass, z)]
-    # The shift to O (tensor elements: products enter with a minus sign).
-    m_x2, m_y2 = dd.mul(first[0], x), dd.mul(first[1], y)
-    m_z2 = dd.scale(first[2], z)
-    elements = {
-        (0, 0): dd.add(m_y2, m_z2),
-        (1, 1): dd.add(m_x2, m_z2),
-        (2, 2): dd.scale(dd.two_prod(radius, radius), mass),
-        (0, 1): dd.negate(dd.mul(first[0], y)),
-        (0, 2): dd.negate(dd.scale(first[0], z)),
-        (1, 2): dd.negate(dd.scale(first[1], z)),
-    }
+    arrays = [np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), mass.shape))
+              for v in (mass, radius, angle, z)]
+    own = None
     if inertia_own is not None:
         own = np.broadcast_to(np.asarray(inertia_own, dtype=float), mass.shape + (3, 3))
-        for key, turned in _turned_elements(own, c, s).items():
-            elements[key] = dd.add(elements[key], turned)
+    n = mass.size
+    top = [float(np.max(np.abs(v))) if n else 0.0 for v in arrays]
+    fast = top[2] <= dd.cos_sin_fast_limit()
+    bounds = _bounds(top[0], top[1], top[3])
+    blocks = [(start, min(start + dd.BLOCK, n)) for start in range(0, n, dd.BLOCK)]
+    # A few blocks are done sooner here than handed over (and waited for) on a busy machine;
+    # in a worker thread (a layout aggregated off the input path) too: waiting there for
+    # other workers could wait for ever.
+    in_worker = in_pool()
+    workers = (os.cpu_count() or 1) if len(blocks) >= _THREADED_BLOCKS and not in_worker else 1
+    share = max(-(-len(blocks) // workers), 1)
+    shares = [blocks[k:k + share] for k in range(0, len(blocks), share)] or [[]]
+    jobs = [pool().submit(_place_blocks, part, arrays, own, bounds, fast)
+            for part in shares[1:]]
+    partials = [_place_blocks(shares[0], arrays, own, bounds, fast)]   # this thread's share
+    return _assemble(partials + [job.result() for job in jobs])
+
+
+_THREADED_BLOCKS = 4
+
+# The sums, by the rows of the kernel's arrays they come from; levels of extraction:
+# two for terms of either sign (summed to ~2^-100 of sum |terms|), one for terms of one
+# sign (no cancellation: exact enough with one).
+_SUMS = (('first', ('mx', 'my', 'mz'), 2), ('products', ('mxz', 'myz', 'mxy'), 2),
+         ('squares', ('mxx', 'myy', 'mzz'), 1), ('mass', ('m',), 1))
+_OWN_SUMS = {'own': (('own_diagonal', ('oxx', 'oyy', 'ozz'), 1),),
+             'd': (('own_d', ('c2d', 'csd'), 2),),
+             'b': (('own_b', ('c2b', 'csb'), 2), ('own_xy', ('b',), 2)),
+             'xz': (('own_xz', ('cxz', 'sxz', 'cyz', 'syz'), 2),)}
+_NAMES = [name for _, names, _ in _SUMS for name in names] + \
+    [name for sums in _OWN_SUMS.values() for _, names, _ in sums for name in names]
+_PROGRAMS = {}
+_LOCAL = threading.local()
+
+
+def _bounds(m, r, h):
+    """Powers of two above the largest |term| of each sum, from max |m|, |R|, |z|."""
+    slack = 1.0 + 2.0 ** -40            # products of rounded factors, |cos| ~ 1 + 2^-52
+    return {name: dd.power_of_two_above(value * slack) for name, value in (
+        ('m', m), ('mx', m * r), ('my', m * r), ('mz', m * h), ('mxz', m * r * h),
+        ('myz', m * r * h), ('mxy', m * r * r), ('mxx', m * r * r), ('myy', m * r * r),
+        ('mzz', m * h * h))}
+
+
+def _program(fast, own):
+    """Return the kernel of one block: angles reduced in it or not; own-tensor terms."""
+    key = (fast, own)
+    if key not in _PROGRAMS:
+        t = dd.Tracer()
+        _trace_place(t, fast, own)
+        _PROGRAMS[key] = t.compile()
+    return _PROGRAMS[key]
+
+
+def _trace_place(t, fast, own):
+    """
+    Trace one block's terms and their partial sums.
+
+    Every product is exact (Dekker's on split factors) up to its low-order parts.
+
+    ``own``: which own-tensor terms the block has, a tuple of 'own', 'd' (I_xx !=
+    I_yy), 'b' (I_xy), 'xz' (I_xz, I_yz); () for point masses.
+    """
+    mass, radius, z = (t.external(name) for name in ('mass', 'radius', 'z'))
+    if fast:
+        index, a, b = dd.trace_reduction(t, t.external('angle'))
+    else:
+        index, a, b = (t.external(name) for name in ('index', 'r_hi', 'r_lo'))
+    cs, cs_lo = dd.trace_cos_sin(t, index, a, b)             # rows cos, sin
+    m_p, r_p, z_p, cs_p = (dd.trace_split(t, v) for v in (mass, radius, z, cs))
+    # Centre of mass in the rotor frame, rows x = R cos, y = R sin.
+    xy, xy_lo = dd.trace_two_prod(t, cs, cs_p, radius, r_p)
+    xy_lo += cs_lo * radius
+    xy_p = dd.trace_split(t, xy)
+    # First moments, rows m x, m y, m z.
+    first, first_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, xy, xy_p, mass, m_p, out=(first[:2], first_lo[:2]))
+    first_lo[:2] += xy_lo * mass
+    dd.trace_two_prod(t, z, z_p, mass, m_p, out=(first[2], first_lo[2]))
+    first_p = dd.trace_split(t, first)
+
+    def row(parts, k):
+        return parts[0][k], parts[1][k]
+
+    # Second moments, rows m x z, m y z, m x y (either sign); m x x, m y y, m z z (positive).
+    products, products_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, first[:2], (first_p[0][:2], first_p[1][:2]), z, z_p,
+                      out=(products[:2], products_lo[:2]))
+    products_lo[:2] += first_lo[:2] * z
+    dd.trace_two_prod(t, first[0], row(first_p, 0), xy[1], row(xy_p, 1),
+                      out=(products[2], products_lo[2]))
+    products_lo[2] += first_lo[0] * xy[1]
+    products_lo[2] += first[0] * xy_lo[1]
+    squares, squares_lo = t.new(3), t.new(3)
+    dd.trace_two_prod(t, first[:2], (first_p[0][:2], first_p[1][:2]), xy, xy_p,
+                      out=(squares[:2], squares_lo[:2]))
+    squares_lo[:2] += first_lo[:2] * xy
+    squares_lo[:2] += first[:2] * xy_lo
+    dd.trace_two_prod(t, first[2], row(first_p, 2), z, z_p, out=(squares[2], squares_lo[2]))
+    squares_lo[2] += first_lo[2] * z
+    terms = {'first': (first, first_lo), 'products': (products, products_lo),
+             'squares': (squares, squares_lo), 'mass': (mass[None], None)}
+    if own:
+        terms.update(_trace_own(t, own, cs, cs_lo, cs_p))
+    for group, names, levels in _SUMS + tuple(s for k in own for s in _OWN_SUMS[k]):
+        hi, lo = terms[group]
+        rows = len(names)
+        dd.trace_partial_sums(t, hi, lo, t.external('sigma_' + group, rows, (rows, levels)),
+                              levels, t.external('sums_' + group, rows, (rows, levels + 1)))
+
+
+def _trace_own(t, own, cs, cs_lo, cs_p):
+    """
+    Trace the own tensors turned by theta (R I R^T): their terms, by sum group.
+
+    With d = I_xx - I_yy and b = I_xy (own frame): turned xx = I_yy + c^2 d - 2 c s b,
+    yy = I_xx - c^2 d + 2 c s b, xy = c s d + (2 c^2 - 1) b, xz = c I_xz - s I_yz,
+    yz = s I_xz + c I_yz, zz = I_zz.
+    """
+    block = t.external('own', 6)                # rows I_xx, I_yy, I_zz, I_xy, I_xz, I_yz
+    terms = {'own_diagonal': (block[:3], None)}
+    c, c_lo, c_p = cs[0], cs_lo[0], (cs_p[0][0], cs_p[1][0])
+    if 'd' in own or 'b' in own:
+        # c^2 and c s, double-double.
+        c2cs, c2cs_lo = dd.trace_two_prod(t, c, c_p, cs, cs_p)
+        c2cs_lo += c * cs_lo
+        c2cs_lo += c_lo * cs
+        c2cs_p = dd.trace_split(t, c2cs)
+    if 'd' in own:
+        d, d_lo = dd.trace_two_sum(t, block[0], -block[1])
+        product, product_lo = dd.trace_two_prod(t, c2cs, c2cs_p, d, dd.trace_split(t, d))
+        product_lo += c2cs_lo * d
+        product_lo += c2cs * d_lo
+        terms['own_d'] = (product, product_lo)
+    if 'b' in own:
+        b = block[3]
+        product, product_lo = dd.trace_two_prod(t, c2cs, c2cs_p, b, dd.trace_split(t, b))
+        product_lo += c2cs_lo * b
+        terms['own_b'] = (product, product_lo)
+        terms['own_xy'] = (block[3:4], None)
+    if 'xz' in own:
+        product, product_lo = t.new(4), t.new(4)          # rows c I_xz, s I_xz, c I_yz, s I_yz
+        for k, value in ((0, block[4]), (2, block[5])):
+            dd.trace_two_prod(t, cs, cs_p, value, dd.trace_split(t, value),
+                              out=(product[k:k + 2], product_lo[k:k + 2]))
+            product_lo[k:k + 2] += cs_lo * value
+        terms['own_xz'] = (product, product_lo)
+    return terms
+
+
+def _place_blocks(blocks, arrays, own, bounds, fast):
+    """Partial sums of the aggregates' terms over some blocks (one worker's share)."""
+    sums = {name: [] for name in _NAMES}
+    mass, radius, angle, z = arrays
+    sigmas = {}                          # block length -> group -> sigma (these bounds)
+    for start, stop in blocks:
+        n = stop - start
+        inputs, programs = _inputs(n)
+        for name, values in (('mass', mass), ('radius', radius), ('z', z)):
+            np.copyto(inputs[name], values[start:stop])
+        if fast:
+            np.copyto(inputs['angle'], angle[start:stop])
+        else:
+            index, inputs['r_hi'][:], inputs['r_lo'][:] = dd.reduce_angles(angle[start:stop])
+            inputs['index'].view(np.int64)[:] = index
+        kinds = ()
+        if own is not None:
+            block = inputs['own']
+            for row, (i, j) in zip(block, ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))):
+                np.copyto(row, own[start:stop, i, j])
+            kinds = ('own',) + tuple(kind for kind, present in (
+                ('d', (block[0] != block[1]).any()), ('b', block[3].any()),
+                ('xz', block[4].any() or block[5].any())) if present)
+            # Every own term is at most |I_xx - I_yy| <= 2 max |element|.
+            top = 2.0 * max(float(block.max()), -float(block.min())) * (1.0 + 2.0 ** -40)
+            own_bound = dd.power_of_two_above(top)
+        arrays_bound, run = dd.bound(programs, (fast, kinds, n), lambda: _program(fast, kinds),
+                                     inputs)
+        groups = _SUMS + tuple(s for k in kinds for s in _OWN_SUMS[k])
+        if n not in sigmas:
+            sigmas[n] = {group: dd.sigma_for(n, [bounds[name] for name in names], levels)
+                         for group, names, levels in _SUMS}
+        for group, names, levels in groups:
+            arrays_bound['sigma_' + group][:] = (
+                sigmas[n][group] if group in sigmas[n]
+                else dd.sigma_for(n, [own_bound] * len(names), levels))
+        run()
+        for group, names, levels in groups:
+            for name, row in zip(names, arrays_bound['sums_' + group].tolist()):
+                sums[name] += row
+    return sums
+
+
+def _inputs(n):
+    """
+    Return this thread's input arrays for blocks of n, and the programs bound to them.
+
+    Shared by the kernel's variants; the few most recent n are kept.
+    """
+    cache = getattr(_LOCAL, 'inputs', None)
+    if cache is None:
+        cache = _LOCAL.inputs = {}
+    if n in cache:
+        cache[n] = cache.pop(n)                     # most recent last
+    else:
+        while len(cache) >= 4:
+            cache.pop(next(iter(cache)))            # with the programs bound to them
+        cache[n] = ({name: np.empty((rows, n)) if rows else np.empty(n) for name, rows in (
+            ('mass', None), ('radius', None), ('z', None), ('angle', None), ('index', None),
+            ('r_hi', None), ('r_lo', None), ('own', 6))}, {})
+    return cache[n]
+
+
+def _assemble(partials):
+    """Add up the workers' partial sums: each aggregate one math.fsum."""
+    sums = {name: [v for part in partials for v in part[name]] for name in _NAMES}
+
+    def total(*terms):
+        return math.fsum(sign * v for sign, name in terms for v in sums[name])
+
     inertia = np.zeros((3, 3))
-    for (i, j), value in elements.items():
-        inertia[i, j] = inertia[j, i] = dd.total(value)
-    total_mass = dd.total((mass, np.zeros_like(mass)))
-    return MassProperties(total_mass, np.array([dd.total(v) for v in first]), inertia)
-
-
-def _turned_elements(own, c, s):
-    """Own tensors turned by theta about Z (R I R^T), element by element, double-double."""
-    cc, ss, cs = dd.mul(c, c), dd.mul(s, s), dd.mul(c, s)
-    o_xx, o_yy, o_zz = own[:, 0, 0], own[:, 1, 1], own[:, 2, 2]
-    o_xy, o_xz, o_yz = own[:, 0, 1], own[:, 0, 2], own[:, 1, 2]
-    two_cs_xy = dd.scale(cs, 2.0 * o_xy)
-    turned_xx = dd.add(dd.add(dd.scale(cc, o_xx), dd.scale(ss, o_yy)), dd.negate(two_cs_xy))
-    turned_yy = dd.add(dd.add(dd.scale(ss, o_xx), dd.scale(cc, o_yy)), two_cs_xy)
-    turned_xy = dd.add(dd.scale(cs, o_xx - o_yy), dd.scale(dd.add(cc, dd.negate(ss)), o_xy))
-    turned_xz = dd.add(dd.scale(c, o_xz), dd.negate(dd.scale(s, o_yz)))
-    turned_yz = dd.add(dd.scale(s, o_xz), dd.scale(c, o_yz))
-    zeros = np.zeros_like(o_zz)
-    return {(0, 0): turned_xx, (1, 1): turned_yy, (2, 2): (o_zz, zeros), (0, 1): turned_xy,
-            (0, 2): turned_xz, (1, 2): turned_yz}
+    inertia[0, 0] = total((1, 'myy'), (1, 'mzz'), (1, 'oyy'), (1, 'c2d'), (-2, 'csb'))
+    inertia[1, 1] = total((1, 'mxx'), (1, 'mzz'), (1, 'oxx'), (-1, 'c2d'), (2, 'csb'))
+    inertia[2, 2] = total((1, 'mxx'), (1, 'myy'), (1, 'ozz'))
+    inertia[0, 1] = inertia[1, 0] = total((-1, 'mxy'), (1, 'csd'), (2, 'c2b'), (-1, 'b'))
+    inertia[0, 2] = inertia[2, 0] = total((-1, 'mxz'), (1, 'cxz'), (-1, 'syz'))
+    inertia[1, 2] = inertia[2, 1] = total((-1, 'myz'), (1, 'sxz'), (1, 'cyz'))
+    first = np.array([total((1, 'mx')), total((1, 'my')), total((1, 'mz'))])
+    return MassProperties(total((1, 'm')), first, inertia)
 
 
 def solid_cylinder(mass, radius, length, axis='axial'):
