@@ -88,7 +88,7 @@ PARAMETERS = (
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
     ('stale_after', 2.0, '/diagnostics says STALE when no motion sample was accepted for '
      'this long (s)', (0.01, 3600.0)),
-    ('input_depth', 200, 'history depth of the best-effort joint_states and speed '
+    ('input_depth', 1000, 'history depth of the best-effort joint_states, speed and load cell '
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
      'no recording', None),
@@ -615,6 +615,9 @@ def main(args=None):
         print(f'balance_monitor: error: bad ROS arguments: {error} (see --help)',
               file=sys.stderr)
         return 2
+    # The layout thread runs Python for seconds on a big layout: hand the GIL back to the
+    # input callbacks every 0.5 ms instead of 5 ms, so their queue does not overflow.
+    sys.setswitchinterval(0.0005)
     try:
         node = BalanceMonitor()
     # ValueError: e.g. the rerun mode, an empty joint_name; OSError: record_path's folder.
