@@ -215,3 +215,16 @@ def test_fuzzed_texts_give_a_layout_or_a_layout_error(text):
         layout_from_text(text)
     except LayoutError as error:
         assert '\n' not in str(error) and len(str(error)) <= MAX_MESSAGE
+
+
+@pytest.mark.parametrize('seed', range(20))
+def test_the_fast_canonical_json_is_asdicts(seed):
+    # The digest's text is built part by part for speed; it must be json.dumps(asdict(...)).
+    from dataclasses import asdict
+    import numpy as np
+    from reference import random_layout
+    rng = np.random.default_rng(seed)
+    layout = parse_layout(random_layout(rng, n=int(rng.integers(1, 12)), supports=1 + seed % 2))
+    data = asdict(layout)
+    del data['balancing']['sites']
+    assert layout.canonical_json() == json.dumps(data, sort_keys=True, separators=(',', ':'))

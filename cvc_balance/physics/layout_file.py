@@ -128,11 +128,13 @@ def _parse(text, source):
 
 
 def _json_object(pairs):
-    mapping = {}
-    for key, value in pairs:
-        if key in mapping:
-            raise LayoutError(f'key {short(key)} given twice')
-        mapping[key] = value
+    mapping = dict(pairs)
+    if len(mapping) < len(pairs):       # a key given twice: say which
+        seen = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise LayoutError(f'key {short(key)} given twice')
+            seen.add(key)
     return mapping
 
 

@@ -225,6 +225,12 @@ class BalanceMonitor(Node):
         self._layout_worker.shutdown(wait=False, cancel_futures=True)
         return super().destroy_node()
 
+    def lost_message(self, error):
+        """Count a message rclpy could not hand over (the spin loop's ``on_error``)."""
+        self._internal_errors += 1
+        self._last_rejection = f'a message rclpy could not convert: {one_line(error, 200)}'
+        self.get_logger().error(self._last_rejection, throttle_duration_sec=THROTTLE_S)
+
     def _guarded(self, callback):
         """
         Wrap a callback so that no failure escapes it: the node must never die of an input.
@@ -626,7 +632,7 @@ def main(args=None):
         rclpy.try_shutdown()
         return 2
     try:
-        spin(node)
+        spin(node, on_error=node.lost_message)
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
