@@ -19,7 +19,7 @@ from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.identify import (CellReadings, fit, identified_unbalance, layout_unbalance,
                                   Motion, residual)
 from cvc_balance.messages import topics
-from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.motion import accepted_motion
 
 
@@ -53,14 +53,16 @@ def cell_readings(bag, supports):
 
 
 def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_revs=None,
-                 time_constant=0.1, max_speed=1000.0, names=None):
+                 time_constant=0.1, max_speed=1000.0, names=None, observer=None):
     """
     Identify each layout segment of ``bag_path``; return ([IdentifiedSegment], problems).
 
     ``bag_path``: a bag file or rosbag2 directory; ``names`` its input topics if not the
     node's (:class:`cvc_balance.bag.inputs.InputTopics`); ``window_revs``: fit only the
     last that many revolutions of each segment (the state at its end, as the live node
-    reports it); default the whole segment.
+    reports it); default the whole segment. ``observer`` (a rerun RunLogger, which must
+    have seen the replay of the same bag) gets each segment's cells beside the layout's
+    prediction (``cells``) and what the fit found (``measured``).
     """
     bag = open_bag(bag_path)
     motion, layout_messages = read_inputs(bag, joint_name, names)
@@ -90,9 +92,28 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
         segments.append(IdentifiedSegment(
             layout, int(max(start_ns, 0)), int(min(end_ns, log_time[hi - 1])), int(hi - lo),
             int(estimate.readings), int(dropped), seg.revolutions(), estimate, identified,
-            declared,
-            residual(identified, declared)))
+            declared, residual(identified, declared)))
+        if observer is not None and estimate.identifiable:
+            _observe(observer, model, seg, cells, estimate, segments[-1])
     return segments, bag.problems + problems
+
+
+def _observe(observer, model, motion, cells, estimate, segment):
+    """Hand the observer each cell (less its fitted zero) beside the layout's prediction."""
+    names = [s.name for s in model.supports]
+    for name, cell in cells.items():
+        if not len(cell.time):
+            continue
+        angle, omega, alpha = motion.at(cell.time)
+        predicted = loads(model, angle, omega, alpha).support_force[name]
+        # The fitted bias holds the cell's zero and the static weight: the predicted one's
+        # weight goes back in, so the two curves differ by the unbalance only.
+        at_rest = loads(model, angle, 0.0, 0.0).support_force[name][:, 0]
+        zero = estimate.biases[names.index(name)].real - float(np.mean(at_rest))
+        observer.cells(name, np.round(cell.time * 1e9).astype(np.int64),
+                       cell.force[:, 0] - zero, predicted[:, 0])
+    # Drawn from the segment's start: the fit holds for the whole of it.
+    observer.measured(int(round(motion.time[0] * 1e9)), segment.residual, segment.identified)
 
 
 def _during(cell, start, end):

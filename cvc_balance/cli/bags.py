@@ -122,6 +122,7 @@ def _replay(args):
                          tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
                          names=input_topics(args), max_stamp_jump=args.max_stamp_jump)
         if logger:
+            _log_cells(args, logger)
             logger.finish()
     summary.output = args.output or ''
     print(format_summary(summary))
@@ -146,6 +147,13 @@ class ReplayProgress:
             self._bar.close()
 
 
+def _log_cells(args, logger):
+    """Add a bag's load cells (if it has any) to its rerun view: measured and residual."""
+    from cvc_balance.bag.identify_run import identify_bag
+    identify_bag(args.bag, getattr(args, 'layout_file', None), args.joint_name,
+                 names=input_topics(args), observer=logger)
+
+
 def _rerun_logger(path, bag, every=10):
     from cvc_balance.view.rerun_log import open_recording, RunLogger
     return RunLogger(open_recording('save', path, name=bag), every)
@@ -157,6 +165,7 @@ def _view(args):
         logger = _rerun_logger(out['rrd'], args.bag, args.every)
         summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
                          names=input_topics(args))
+        _log_cells(args, logger)
         logger.finish()
         print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
               f'{len(summary.segments)} layouts')

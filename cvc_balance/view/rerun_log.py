@@ -58,6 +58,8 @@ STATOR_RING_RADIUS = 0.85      # m, drawn for orientation
 VIEW_PIXELS = 500
 """Pixels across the rotor in a typical 3D view: a shape under two of them is a point."""
 LABEL_SPACING = 0.4
+RESIDUAL_COLOUR = (170, 90, 220)
+"""The load cells' residual (measured - layout) in the polar views and events."""
 """m: a 3D label this close to a more important one is left out (hover shows the name)."""
 POLAR_REACH = 1.4
 """Longest vector drawn in the polar views (fraction of the limit); its label gives more."""
@@ -93,12 +95,13 @@ def plane_keys(layout):
     return PLANES if layout.correction_planes() is not None else ('static',)
 
 
-def blueprint(support_names, planes=PLANES, static_range=None):
+def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
     """
     Arrange the views: 3D and polar left, plots in the middle, verdict and events right.
 
     ``static_range`` (N, N): the static weight plot's axis (a constant line would
-    otherwise be fitted to its rounding).
+    otherwise be fitted to its rounding). ``cells``: add the load cells' plot
+    (measured against the layout's prediction).
     """
     plots = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
                                    '(ISO 21940-11: OK, WARN, ERROR)'),
@@ -116,6 +119,10 @@ def blueprint(support_names, planes=PLANES, static_range=None):
                                  '[N] (at rest)', plot_legend=rrb.PlotLegend('RightBottom'),
                                  axis_y=rrb.ScalarAxis(range=list(static_range))
                                  if static_range else None)]
+    if cells:
+        plots.append(rrb.TimeSeriesView(origin='plots/cells', name='load cell x [N]: measured '
+                                        '(less its fitted zero) against the layout\'s '
+                                        'prediction', plot_legend=rrb.PlotLegend('LeftTop')))
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
                                 y_range=[-POLAR_BOUNDS[1], POLAR_BOUNDS[1]])
     polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
@@ -171,6 +178,7 @@ class RunLogger:
         self._static_logged = False
         self._time_ns = 0
         self._warnings, self._changes = (), {}
+        self._cells = False
 
     def finish(self):
         """Flush and close the recording."""
@@ -210,7 +218,8 @@ class RunLogger:
                 low, high = 0.75 * lightest, 1.15 * heaviest
                 self._static_range = (low, high) if shown is None else \
                     (min(low, shown[0]), max(high, shown[1]))
-            rec.send_blueprint(blueprint(self._supports, planes, self._static_range))
+            rec.send_blueprint(blueprint(self._supports, planes, self._static_range,
+                                         self._cells))
             self._log_styles(new, planes)
         self._model = model
         # The verdict is the full model's (replay --tolerance may hand a reduced one).
@@ -410,6 +419,63 @@ class RunLogger:
         rec.log(f'polar/{key}/labels', rr.Points2D(
             positions, radii=0.0, labels=texts, show_labels=True,
             colors=colours + [LEVEL_COLOURS[assessment.ERROR], (160, 160, 170)]))
+
+    # -- load cells ---------------------------------------------------------------------
+
+    def cells(self, support, stamp_ns, measured_x, predicted_x):
+        """
+        Plot a support's load cell beside the force the layout predicts there.
+
+        Stator x, N, the cell's fitted zero taken off; both at the cell's stamps (ns).
+        """
+        if not self._cells:
+            self._cells = True
+            self.rec.send_blueprint(blueprint(self._supports, self._planes or PLANES,
+                                              self._static_range, True))
+        times = rr.TimeColumn(TIMELINE, timestamp=np.asarray(stamp_ns) * 1e-9)
+        index = self._supports.index(support) if support in self._supports else 0
+        colour = SUPPORT_COLOURS[index % len(SUPPORT_COLOURS)]
+        for kind, values in (('measured', measured_x), ('predicted', predicted_x)):
+            # The layout's prediction paler and thinner, in the support's colour.
+            shade = colour if kind == 'measured' else tuple((c + 255) // 2 for c in colour)
+            self.rec.log(f'plots/cells/{support}/{kind}', rr.SeriesLines(
+                names=[f'{support} {kind} [N]'], colors=[shade],
+                widths=[1.5 if kind == 'measured' else 2.5]), static=True)
+            rr.send_columns(f'plots/cells/{support}/{kind}', indexes=[times],
+                            columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
+                            recording=self.rec)
+
+    def measured(self, time_ns, residual, identified):
+        """
+        Draw what the cells found, from ``time_ns``, and say it in the events.
+
+        Per plane the residual (measured - declared, a
+        :class:`cvc_balance.identify.RotorUnbalance`) on its polar diagram, in the
+        diagram's units (fractions of the plane's permissible share), with its 95 % radius.
+        """
+        verdict = self._verdict
+        if verdict is None or verdict.assessment is None:
+            return
+        rec = self.rec
+        rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        allowed = verdict.assessment.plane_permissible
+        for key, (_, off), share in zip(self._planes, residual.planes, allowed):
+            reach = min(off.amount / share, POLAR_REACH)
+            c, s = math.cos(off.angle), math.sin(off.angle)
+            rec.log(f'polar/{key}/residual', rr.Arrows2D(
+                origins=[[0.0, 0.0]], vectors=[[reach * c, -reach * s]],
+                colors=[RESIDUAL_COLOUR], radii=0.02))
+            # Its words in a row of their own, under the unbalance's (not at the tip,
+            # where they would print over the grid's labels).
+            rec.log(f'polar/{key}/residual_label', rr.Points2D(
+                [[0.0, -POLAR_TEXT_ROW + 0.08]], radii=0.0, colors=[RESIDUAL_COLOUR],
+                labels=[f'cells - layout {g_mm(off.amount):,.0f}±{g_mm(off.ci95):,.0f} g mm '
+                        f'{degrees(off.angle):.0f}°'],
+                show_labels=True))
+        found = '; '.join(f'{key[6:]} {g_mm(v.amount):,.0f} g mm at {degrees(v.angle):.0f}°'
+                          for key, (_, v) in zip(self._planes, residual.planes))
+        self._event(f'load cells: the rotor differs from its layout by {found}', 'INFO',
+                    RESIDUAL_COLOUR)
 
     # -- samples ----------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ start-up notice are done. Nothing depends on timing luck. It needs a Vulkan adap
 import io
 import os
 import shutil
+import sys
 import signal
 import socket
 import subprocess
@@ -41,7 +42,9 @@ class HeadlessViewer:
         self._work = tempfile.mkdtemp(prefix='cvc_balance_viewer_')
         env = dict(os.environ, XDG_CONFIG_HOME=os.path.join(self._work, 'config'),
                    RERUN_ANALYTICS='false')
-        rerun = shutil.which('rerun')
+        # The viewer comes with rerun-sdk: next to this Python (a venv not on PATH) or on PATH.
+        beside = os.path.join(os.path.dirname(sys.executable), 'rerun')
+        rerun = beside if os.access(beside, os.X_OK) else shutil.which('rerun')
         if rerun is None:
             raise ViewerError('the rerun viewer (rerun-sdk) is not installed')
         subprocess.run([rerun, 'analytics', 'disable'], env=env, capture_output=True,
