@@ -74,11 +74,14 @@ def hostile_stream(work, seconds, rate=5000):
     rng = random.Random(1)
     layouts = list(HOSTILE_LAYOUTS.values()) + [yaml.safe_dump(LAYOUT_A)] * 4
     ns, sent, good, start_rss, start_time = 10**10, 0, 0, None, time.monotonic()
-    next_layout = start_time
+    next_layout, next_rss, trace = start_time, start_time + 10.0, []
     while time.monotonic() - start_time < seconds:
         now = time.monotonic() - start_time
         if start_rss is None and now > 5.0:
             start_rss = rss_mb(node.process.pid)
+        if time.monotonic() >= next_rss:
+            trace.append(f'{now:.0f} s {rss_mb(node.process.pid):.0f} MB')
+            next_rss += 10.0
         if time.monotonic() >= next_layout:
             text = rng.choice(layouts)
             layout_pub.publish(text if isinstance(text, bytes) else String(data=text))
@@ -111,7 +114,7 @@ def hostile_stream(work, seconds, rate=5000):
     print(f'1. hostile stream: {sent} samples in {elapsed:.1f} s ({sent / elapsed:.0f}/s), '
           f'{good} of them valid; node alive: {alive}, exit {code}; resident memory '
           f'{start_rss:.1f} MB after 5 s, {end_rss:.1f} MB at the end '
-          f'({end_rss - start_rss:+.1f} MB); {counts}')
+          f'({end_rss - start_rss:+.1f} MB; every 10 s: {", ".join(trace)}); {counts}')
 
 
 def layout_swap(work, swaps=3, seconds=3.0, depth=None):
