@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, finite, input_topics,
-                                       OUTPUT_BAG_HELP, tolerance)
+                                       machine_id, OUTPUT_BAG_HELP, print_json, tolerance)
 from cvc_balance.physics.model_choice import Tolerance
 
 
@@ -19,6 +19,9 @@ def register(commands):
                                    'from a scenario file (speed profile, noise, layout changes).')
     simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
     simulate.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
+    simulate.add_argument('--machine-id', type=machine_id, metavar='ID',
+                          help='the machine the run is recorded on, written into the bag '
+                          '(MCAP metadata; metadata.yaml custom_data for a directory)')
     simulate.set_defaults(run=_simulate)
 
     replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
@@ -87,6 +90,9 @@ def register(commands):
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
     record.add_argument('--chunk-kib', type=int, default=1024, metavar='K',
                         help='chunk size; a killed recorder loses at most one chunk')
+    record.add_argument('--machine-id', type=machine_id, metavar='ID',
+                        help='the machine recorded, written into the bag (MCAP metadata; '
+                        'metadata.yaml custom_data for a directory)')
     record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
                         help='print "ready" once this topic\'s publisher is matched')
     record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
@@ -97,7 +103,7 @@ def register(commands):
 def _simulate(args):
     from cvc_balance.bag.scenario import load_scenario, write_bag
     scenario = load_scenario(args.scenario)
-    count = write_bag(scenario, args.output)
+    count = write_bag(scenario, args.output, machine_id=args.machine_id)
     print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
           f'{len(scenario.layouts)} layouts')
     return 0
