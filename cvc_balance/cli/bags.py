@@ -42,6 +42,9 @@ def register(commands):
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
     replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
+    replay.add_argument('--json', action='store_true',
+                        help='print the summary as one JSON object (README "Bags"); with '
+                        'load cells in the bag, each segment\'s identified unbalance too')
     replay.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
                         help='largest change accepted in the forces (N), moments (N m) and '
                         'drive torque (N m), inf for an output not asked: each layout takes '
@@ -121,6 +124,17 @@ def _replay(args):
                      names=input_topics(args))
     if logger:
         logger.finish()
+    if args.json:
+        from cvc_balance.bag.identify_run import identify_bag
+        from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
+        from cvc_balance.bag.run_summary import has_load_cells, replay_record
+        identified = identify_bag(args.bag, args.layout_file, args.joint_name,
+                                  time_constant=args.alpha_time_constant,
+                                  max_speed=args.max_speed, names=input_topics(args))[0] \
+            if has_load_cells(args.bag) else None
+        print_json(replay_record(summary, identified,
+                                 bag_custom_data(args.bag).get(MACHINE_ID)))
+        return 0
     print(format_summary(summary))
     return 0
 
