@@ -36,7 +36,8 @@ from cvc_balance.fleet.rows import PLANES
 DAY_NS = 86_400 * 10**9
 HORIZON_DAYS = 3650
 """How far ahead a crossing of the grade is looked for (days)."""
-OUT, LEAVES, STABLE, FEW = 'OUT OF GRADE', 'LEAVES GRADE', 'NO DRIFT OUT', 'TOO FEW RUNS'
+OUT, LEAVES, STABLE, FEW = 'OUT OF GRADE', 'LEAVES GRADE', 'NO SIGNIFICANT DRIFT', \
+    'TOO FEW RUNS'
 
 
 @dataclass
