@@ -126,7 +126,7 @@ def run_fleet(paths, results, engine='dask', scheduler=None, workers=None, progr
                 todo.append((os.path.abspath(bag), os.path.abspath(root), digest,
                              stats[bag], str(bag)))
         new_rows, new_failures = [], []
-        now = time.time_ns()
+        now = time.time_ns() // 1000 * 1000
         for bag, reason in unreadable:
             new_failures.append(failure_row(None, bag, (None, None), (None, None), reason, now))
         moment = time.perf_counter()
@@ -259,7 +259,7 @@ def _lost(function, item, error):
     """The outcome of a task that did not come back: every bag of it failed, with the reason."""
     from cvc_balance.physics.layout import one_line
     reason = f'worker lost: {type(error).__name__}: {one_line(error, 300)}'
-    now = time.time_ns()
+    now = time.time_ns() // 1000 * 1000
     if function is identify_bag_files:
         return [(path, None, reason) for path in item]
     return [('failed', failure_row(digest, label, stat, (None, None), reason, now))

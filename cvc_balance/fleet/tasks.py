@@ -44,7 +44,7 @@ def analyse(path, root, digest, stat, label=None):
     """
     label = path if label is None else label
     started = time.perf_counter()
-    now = time.time_ns()
+    now = time.time_ns() // 1000 * 1000     # to the microsecond, as every time in the tables
     try:
         machine = machine_of(path, root)
     except OSError:

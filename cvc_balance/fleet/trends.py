@@ -240,6 +240,8 @@ def _fit(trend, now):
     trend.leaves = _crossing(grid, line, limit)
     trend.leaves_earliest = _crossing(grid, line + half, limit)
     trend.leaves_latest = _crossing(grid, line - half, limit)
+    if trend.leaves is None:          # a drift too slow to matter within the horizon
+        trend.status = STABLE
 
 
 def _crossing(grid, values, limit):
