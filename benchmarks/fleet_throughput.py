@@ -20,6 +20,7 @@ import time
 
 
 def main():
+    """Simulate the fleet, time each way of analysing it, print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--machines', type=int, default=20)
     parser.add_argument('--runs', type=int, default=10)

@@ -13,7 +13,7 @@ and rosbags. No timing is asserted (see benchmarks/fleet_throughput.py).
 """
 
 import contextlib
-from datetime import datetime, timedelta, timezone
+from datetime import timedelta
 import hashlib
 import io
 import json
@@ -141,6 +141,24 @@ def test_replay_json_from_a_fresh_process(fleet):
         assert table[bag]['identified_plane_II_g_mm'] == \
             segment['identified']['identified']['planes'][1]['g_mm']
         assert table[bag]['plane_I_g_mm'] == segment['balance']['planes'][0]['g_mm']
+
+
+def test_replay_json_verdict_is_solves():
+    # The bundled bag's first layout is config/ct_gantry.yaml, judged at its service speed:
+    # replay --json's balance block must be solve --json's, key for key.
+    code, out, err = run_cli('replay', ROOT / 'bags' / 'loose_bracket.mcap', '--json')
+    assert code == 0, err
+    replayed = json.loads(out)['segments'][0]['balance']
+    code, out, err = run_cli('solve', LAYOUT, '--omega', 23.27, '--json')
+    solved = json.loads(out)['balance']
+    assert json.loads(out)['layout']['digest'] == \
+        json.loads(run_cli('replay', ROOT / 'bags' / 'loose_bracket.mcap', '--json')[1])[
+            'segments'][0]['layout']['digest']
+    assert set(solved) <= set(replayed)
+    for key, value in solved.items():
+        assert replayed[key] == value, key
+    assert replayed['static_g_mm'] == pytest.approx(
+        json.loads(out)['static_unbalance']['kg_m'] * 1e6, rel=1e-12)
 
 
 def test_damaged_bags_are_listed_and_the_rest_done(fleet):
@@ -349,4 +367,3 @@ def test_bad_input_one_line_exit_2(argv, says, tmp_path, monkeypatch):
     assert code == 2, (code, out, err)
     assert says in err and err.count('\n') == 1 and 'Traceback' not in err
     assert (ROOT / 'README.md').read_bytes() == readme
-

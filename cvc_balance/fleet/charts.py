@@ -55,7 +55,7 @@ def machine_chart(trend, path):
 
 
 def _end(plane):
-    """The last time (ns) a plane's chart shows: its last run or its projection."""
+    """Return the last time (ns) a plane's chart shows: its last run or its projection."""
     if plane.status == LEAVES and plane.leaves_latest is not None:
         return int(plane.leaves_latest.timestamp() * 1e9)
     if plane.status == LEAVES and plane.leaves is not None:

@@ -256,7 +256,7 @@ class _Dask:
 
 
 def _lost(function, item, error):
-    """The outcome of a task that did not come back: every bag of it failed, with the reason."""
+    """Return the outcome of a task that did not come back: each of its bags failed."""
     from cvc_balance.physics.layout import one_line
     reason = f'worker lost: {type(error).__name__}: {one_line(error, 300)}'
     now = time.time_ns() // 1000 * 1000

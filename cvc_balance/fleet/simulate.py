@@ -149,7 +149,7 @@ def _state(layout, plan, when, first, counterweight, tube):
 
 
 def _scenario(plan, declared, true, when, rate, cell_rate, speed, seed):
-    """The scenario of one run: a short check at the service speed with load cells."""
+    """Return the scenario of one run: a short check at the service speed, load cells."""
     hidden = [{'at': 0.0, 'add': dict(plan.as_built)}]
     by_name = {c['name']: c for c in declared['components']}
     for component in true['components']:

@@ -16,7 +16,7 @@ import pyarrow.parquet as pq
 
 
 def failures_path(results):
-    """Return the failures table's path beside ``results`` (``X.parquet`` -> ``X.failures.parquet``)."""
+    """Return the failures table's path beside ``results``: X.parquet, X.failures.parquet."""
     results = Path(results)
     stem = results.name[:-len('.parquet')] if results.name.endswith('.parquet') \
         else results.name

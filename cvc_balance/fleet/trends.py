@@ -149,7 +149,7 @@ def read_series(results, machine=None):
 
 
 def _filled(values):
-    """A masked array's values with nan (numbers) or False (flags) where masked."""
+    """Return a masked array's values, nan (numbers) or False (flags) where masked."""
     if isinstance(values, np.ma.MaskedArray):
         if values.dtype.kind == 'f':
             return values.filled(np.nan)
@@ -245,7 +245,7 @@ def _fit(trend, now):
 
 
 def _crossing(grid, values, limit):
-    """The first date of ``grid`` at which ``values`` reach ``limit`` (None: never)."""
+    """Return the first date of ``grid`` where ``values`` reach ``limit`` (None: never)."""
     above = np.flatnonzero(values >= limit)
     return _date(grid[above[0]]) if len(above) else None
 
