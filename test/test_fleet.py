@@ -52,7 +52,7 @@ def run_cli(*argv):
 
 @pytest.fixture(scope='module')
 def fleet(tmp_path_factory):
-    """The simulated fleet, two damaged bags, and one pass of ``fleet`` on the LocalCluster."""
+    """Simulate the fleet, add two damaged bags, run ``fleet`` once on the LocalCluster."""
     base = tmp_path_factory.mktemp('fleet')
     root = base / 'runs'
     plans = simulate_fleet(LAYOUT, root, machines=MACHINES, runs=RUNS, days=180.0, seed=7)
