@@ -20,9 +20,11 @@ import json
 import math
 from pathlib import Path
 import shutil
+import signal
 import struct
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -33,6 +35,7 @@ from cvc_balance.bag.machine import bag_custom_data, machine_of
 from cvc_balance.cli import main
 from cvc_balance.fleet import content_digest, find_bags, simulate_fleet
 from cvc_balance.fleet.trends import LEAVES, machine_trends
+from ros_harness import NodeProcess, ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT = ROOT / 'config' / 'ct_gantry.yaml'
@@ -367,3 +370,29 @@ def test_bad_input_one_line_exit_2(argv, says, tmp_path, monkeypatch):
     assert code == 2, (code, out, err)
     assert says in err and err.count('\n') == 1 and 'Traceback' not in err
     assert (ROOT / 'README.md').read_bytes() == readme
+
+
+def test_node_and_recorder_write_the_machine_id(tmp_path):
+    # The node's machine_id parameter and `cvc-balance record --machine-id`, as processes
+    # on this test run's own ROS domain: their recordings carry the id.
+    own = tmp_path / 'node_run'
+    node = NodeProcess('cvc_balance.ros.balance_monitor',
+                       ['-p', f'record_path:={own}', '-p', 'machine_id:=site-b/gantry-0042',
+                        '-p', f'layout_file:={LAYOUT}'], tmp_path / 'node.log')
+    record = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'record', '-o',
+                               str(tmp_path / 'rec.mcap'), '--machine-id', 'gantry-0043'],
+                              env=ros_environment(), stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (
+            any(own.glob('*.mcap')) and (tmp_path / 'rec.mcap').exists()):
+        time.sleep(0.2)
+    time.sleep(1.0)
+    record.send_signal(signal.SIGINT)
+    out, err = record.communicate(timeout=30)
+    assert record.returncode == 0, err
+    assert node.stop(signal.SIGINT) == 0, node.log()
+    assert machine_of(own) == ('site-b/gantry-0042', 'bag')
+    assert yaml.safe_load((own / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']['custom_data'] == {'machine_id': 'site-b/gantry-0042'}
+    assert machine_of(tmp_path / 'rec.mcap') == ('gantry-0043', 'bag')

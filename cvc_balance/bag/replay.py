@@ -56,6 +56,7 @@ class Segment:
     choice: object = None      # model_choice.ModelChoice when a tolerance was given
     first_ns: int = None       # log times of its first and last sample (None: no sample)
     last_ns: int = None
+    model: object = None       # the full RotorModel of the layout (the verdict's)
 
 
 @dataclass
@@ -188,7 +189,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         if hi > lo:
             segment.first_ns, segment.last_ns = int(log_time[lo]), int(log_time[hi - 1])
         if tolerance is None:
-            model = RotorModel.from_layout(layout)
+            model = segment.model = RotorModel.from_layout(layout)
         else:
             envelope = Envelope(float(np.abs(omega[lo:hi]).max(initial=0.0)),
                                 float(np.abs(alpha[lo:hi]).max(initial=0.0)))

@@ -94,7 +94,7 @@ def replay_record(summary, identified=None, machine_id=None):
 def segment_record(segment, identified=None):
     """Return one layout segment of a replay as JSON-able data (see :func:`replay_record`)."""
     layout = segment.layout
-    model = RotorModel.from_layout(layout)
+    model = segment.model or RotorModel.from_layout(layout)     # aggregated once
     verdict = judge_balance(model, top_speed=segment.max_speed)
     balance = verdict_summary(verdict)
     choice = segment.choice
