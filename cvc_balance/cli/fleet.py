@@ -36,8 +36,9 @@ def register(commands):
                        "the same paths and have cvc_balance installed")
     fleet.add_argument('--workers', type=count, metavar='N',
                        help='LocalCluster worker processes (default: the cores, at most 2)')
-    fleet.add_argument('--batch', type=count, default=1, metavar='N',
-                       help='bags per task (default 1; more for many small bags)')
+    fleet.add_argument('--batch', type=count, metavar='N',
+                       help='bags per task (default: small bags together, up to ~4 MB and '
+                       '16 bags a task; large ones alone)')
     fleet.add_argument('--retry-failures', action='store_true',
                        help='analyse again the bags listed as failed before')
     fleet.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
@@ -110,7 +111,8 @@ def _fleet(args):
           + (f', {report.failed_before} failed before (not retried: --retry-failures)'
              if report.failed_before else '')
           + (f', {report.duplicates} duplicates of another bag' if report.duplicates else ''))
-    print(f'engine {report.engine} ({report.workers} worker{"s" * (report.workers != 1)}): '
+    print(f'engine {report.engine} ({report.workers} worker{"s" * (report.workers != 1)}, '
+          f'{report.batch} bag{"s" * (report.batch != 1)} a task): '
           f'{report.seconds:.2f} s in all, digests {report.digest_seconds:.2f} s, analysis '
           f'{report.analysis_seconds:.2f} s ({rate:.1f} bags/s)')
     if report.new_failures:
