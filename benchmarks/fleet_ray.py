@@ -5,7 +5,7 @@ The issue asks to use Ray Data if it does this job clearly better here. Ray is n
 installed by ``dev.sh``; to run this, put it beside the environment, not in it:
 
     ./dev.sh run python -m pip install --target /tmp/raypkgs ray==2.60.0
-    PYTHONPATH=/tmp/raypkgs ./dev.sh run python benchmarks/fleet_ray.py [--machines 20] [--runs 10]
+    PYTHONPATH=/tmp/raypkgs ./dev.sh run python benchmarks/fleet_ray.py [--runs 10]
 
 Times, best of ``--repeat``, for the analysis of every bag (``tasks.analyse_batch`` on
 paths, the rows returned to the driver): Ray tasks (``ray.remote``, 2 worker processes,
