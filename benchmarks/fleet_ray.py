@@ -9,9 +9,10 @@ installed by ``dev.sh``; to run this, put it beside the environment, not in it:
 
 Times, best of ``--repeat``, for the analysis of every bag (``tasks.analyse_batch`` on
 paths, the rows returned to the driver): Ray tasks (``ray.remote``, 2 worker processes,
-the cluster started apart; one bag a task, then ``--batch`` bags a task), Ray Data (``from_items(...).map_batches``) where it imports,
-and Dask's LocalCluster with 2 workers (``client.map``); the cluster start-ups; a round
-trip of a no-op task on each. Prints the figures; asserts nothing.
+the cluster started apart; one bag a task, then ``--batch`` bags a task), Ray Data
+(``from_items(...).map``) where it imports, and Dask's LocalCluster with 2 workers
+(``client.map``); the cluster start-ups; a round trip of a no-op task on each. Prints
+the figures; asserts nothing.
 """
 
 import argparse
