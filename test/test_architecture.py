@@ -28,6 +28,7 @@ LAYERS = {
     'study': 2,        # methods side by side, the 40-digit reference, the bench
     'report': 2,       # the field-balancing report: HTML and PNG figures
     'ros': 3,          # the node, play, record
+    'fleet': 3,        # every run of every machine on Dask, Parquet tables, trends
     'cli': 4,          # the cvc-balance command
 }
 
@@ -43,6 +44,7 @@ THIRD_PARTY = {
     'view': {'numpy', 'rerun', 'PIL'},
     'study': {'numpy', 'mpmath', 'matplotlib'},
     'report': {'numpy', 'matplotlib'},
+    'fleet': {'numpy', 'scipy', 'yaml', 'pyarrow', 'duckdb', 'dask', 'matplotlib', 'tqdm'},
 }
 
 

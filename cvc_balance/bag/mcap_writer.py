@@ -25,8 +25,8 @@ from typing import NamedTuple
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Schema, Statistics,
-                          SummaryOffset)
+from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Metadata,
+                          MetadataIndex, Schema, Statistics, SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
@@ -220,12 +220,16 @@ class MessageBlock:
 class BagWriter:
     """Write a rosbag2-compatible MCAP file (see the module's description)."""
 
-    def __init__(self, path, compression='zstd', chunk_bytes=1 << 20, level=None):
+    def __init__(self, path, compression='zstd', chunk_bytes=1 << 20, level=None,
+                 metadata=None):
         """
         Open ``path`` for writing; ``compression`` 'zstd', 'lz4' or ''.
 
         ``level`` is the compressor's level (default: zstd :data:`ZSTD_LEVEL`,
-        lz4 0); ``chunk_bytes`` the uncompressed size of a chunk.
+        lz4 0); ``chunk_bytes`` the uncompressed size of a chunk. ``metadata``
+        ({name: {key: value}}, strings) is written as MCAP Metadata records right
+        after the header (so a truncated recording keeps them) and indexed in the
+        summary, e.g. the machine's identity (:mod:`cvc_balance.bag.machine`).
         """
         self.path = str(path)
         _remove_old(self.path)
@@ -254,6 +258,14 @@ class BagWriter:
         self._index_templates = {}
         self._write_all([MCAP0_MAGIC])
         self._emit(Header(profile=PROFILE, library=LIBRARY))
+        self._metadata_indexes = []
+        for name, values in (metadata or {}).items():
+            record = Metadata(name=str(name), metadata={str(k): str(v)
+                                                        for k, v in values.items()})
+            start = self._emit(record)
+            self._metadata_indexes.append(MetadataIndex(offset=start,
+                                                        length=self._position - start,
+                                                        name=record.name))
         self._closed = False
 
     def add_channel(self, topic, msg_type, latched=False, best_effort=False):
@@ -338,8 +350,11 @@ class BagWriter:
         groups = ((Opcode.SCHEMA, self._schemas.values()),
                   (Opcode.CHANNEL, self._channels.values()),
                   (Opcode.STATISTICS, [self._statistics()]),
+                  (Opcode.METADATA_INDEX, self._metadata_indexes),
                   (Opcode.CHUNK_INDEX, self._chunk_indexes))
         for opcode, records in groups:
+            if opcode == Opcode.METADATA_INDEX and not records:
+                continue                        # files without metadata stay as they were
             start = summary.count
             for record in records:
                 record.write(summary)
@@ -404,9 +419,10 @@ class BagWriter:
             os.posix_fadvise(self._fd, start, length, os.POSIX_FADV_DONTNEED)   # clean: dropped
 
     def _emit(self, record):
+        """Write one framing record; return where it starts."""
         builder = RecordBuilder()
         record.write(builder)
-        self._write_all([builder.end()])
+        return self._write_all([builder.end()])
 
     def _flush_pending(self):
         if not self._pending:
@@ -494,7 +510,8 @@ class BagWriter:
         start, end = self._times
         return Statistics(message_count=sum(self._counts.values()),
                           schema_count=len(self._schemas), channel_count=len(self._channels),
-                          attachment_count=0, metadata_count=0, chunk_count=self._chunk_count,
+                          attachment_count=0, metadata_count=len(self._metadata_indexes),
+                          chunk_count=self._chunk_count,
                           message_start_time=start or 0, message_end_time=end or 0,
                           channel_message_counts=dict(self._counts))
 

@@ -54,6 +54,9 @@ class Segment:
     peak_total: float = 0.0
     max_speed: float = 0.0
     choice: object = None      # model_choice.ModelChoice when a tolerance was given
+    first_ns: int = None       # log times of its first and last sample (None: no sample)
+    last_ns: int = None
+    model: object = None       # the full RotorModel of the layout (the verdict's)
 
 
 @dataclass
@@ -183,8 +186,10 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     for (start_ns, layout), end_ns in zip(events, bounds):
         lo, hi = np.searchsorted(log_time, [start_ns, end_ns])
         segment = Segment(layout, int(start_ns))
+        if hi > lo:
+            segment.first_ns, segment.last_ns = int(log_time[lo]), int(log_time[hi - 1])
         if tolerance is None:
-            model = RotorModel.from_layout(layout)
+            model = segment.model = RotorModel.from_layout(layout)
         else:
             envelope = Envelope(float(np.abs(omega[lo:hi]).max(initial=0.0)),
                                 float(np.abs(alpha[lo:hi]).max(initial=0.0)))

@@ -40,6 +40,8 @@ from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.messages.msg_schema import type_hash
 
 METADATA = 'metadata.yaml'
+CUSTOM_DATA_RECORD = 'cvc_balance'
+"""Name of the MCAP Metadata record holding a bag's custom data (the machine's identity)."""
 VERSION = 9
 """metadata.yaml version written (rosbag2 of ROS 2 Jazzy)."""
 SQLITE_MAGIC = b'SQLite format 3\x00'
@@ -282,18 +284,25 @@ def _first_line(error):
     return (str(error).strip().splitlines() or [type(error).__name__])[0]
 
 
-def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None):
+def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None, custom_data=None):
     """
     Return a writer for ``path``: a single MCAP file if it ends in .mcap, else a rosbag2 directory.
 
     Both have the methods of :class:`~cvc_balance.bag.mcap_writer.BagWriter`.
+    ``custom_data`` ({key: value} strings, e.g. ``{'machine_id': 'gantry-0042'}``) goes
+    into the MCAP file as a Metadata record named :data:`CUSTOM_DATA_RECORD` and, for a
+    directory, into ``metadata.yaml``'s ``custom_data`` too (as ``ros2 bag record
+    --custom-data`` puts it).
     """
     text = os.fspath(path)
+    metadata = {CUSTOM_DATA_RECORD: dict(custom_data)} if custom_data else None
     if text.endswith('.mcap'):
-        return BagWriter(text, compression=compression, chunk_bytes=chunk_bytes, level=level)
+        return BagWriter(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
+                         metadata=metadata)
     if text.endswith('.db3'):
         raise BagError(f'{text}: cannot write sqlite3 bags; give a .mcap file or a directory')
-    return Rosbag2Writer(text, compression=compression, chunk_bytes=chunk_bytes, level=level)
+    return Rosbag2Writer(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
+                         metadata=metadata)
 
 
 class Rosbag2Writer:
@@ -311,6 +320,7 @@ class Rosbag2Writer:
         self.file_name = f'{self.directory.name}_0.mcap'
         self.path = str(self.directory)
         self.writer = BagWriter(self.directory / self.file_name, **options)
+        self.custom_data = dict((options.get('metadata') or {}).get(CUSTOM_DATA_RECORD) or {})
         self._closed = False
 
     def add_channel(self, topic, msg_type, latched=False, best_effort=False):
@@ -335,7 +345,7 @@ class Rosbag2Writer:
             return
         self.writer.close()
         topics, (first, last) = self.writer.written()
-        text = metadata_yaml(self.file_name, topics, first, last)
+        text = metadata_yaml(self.file_name, topics, first, last, self.custom_data)
         temporary = self.directory / f'.{METADATA}.tmp'
         temporary.write_text(text, encoding='utf-8')
         temporary.replace(self.directory / METADATA)
@@ -388,12 +398,12 @@ def _prepare_directory(directory):
                            f'{error.strerror}') from None
 
 
-def metadata_yaml(file_name, topics, first, last):
+def metadata_yaml(file_name, topics, first, last, custom_data=None):
     """
     Return rosbag2's metadata.yaml (version 9) for one file of ``topics`` ([TopicWritten]).
 
     ``first`` and ``last`` are the earliest and latest log times (ns, None if no
-    message was written).
+    message was written); ``custom_data`` {key: value} strings (None: none).
     """
     count = sum(t.count for t in topics)
     start = int(first) if first is not None else 0
@@ -417,7 +427,8 @@ def metadata_yaml(file_name, topics, first, last):
         'compression_mode': '',
         'relative_file_paths': [file_name],
         'files': [{'path': file_name, **span(), 'message_count': count}],
-        'custom_data': None,
+        'custom_data': ({str(k): str(v) for k, v in custom_data.items()}
+                        if custom_data else None),
         'ros_distro': 'jazzy',
     }
     return yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)

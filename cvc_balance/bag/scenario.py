@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from cvc_balance.bag.machine import custom_data
 from cvc_balance.bag.mcap_writer import MessageBlock
 from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
@@ -263,11 +264,17 @@ def _load_cells(spec, layout, path):
                      for name in names}}
 
 
-def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16):
-    """Write the scenario's input bag (.mcap file or rosbag2 directory): /layout, /joint_states."""
+def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16, machine_id=None):
+    """
+    Write the scenario's input bag (.mcap file or rosbag2 directory): /layout, /joint_states.
+
+    ``machine_id``: the machine the run is recorded on, written into the bag
+    (:mod:`cvc_balance.bag.machine`).
+    """
     stamps = scenario.stamps_ns()
     angle, omega = scenario.measured()
-    with open_writer(output, compression=compression, chunk_bytes=chunk_bytes) as writer:
+    with open_writer(output, compression=compression, chunk_bytes=chunk_bytes,
+                     custom_data=custom_data(machine_id)) as writer:
         layout_channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
         joint_channel = writer.add_channel('/joint_states', 'sensor_msgs/msg/JointState',
                                            best_effort=True)

@@ -14,7 +14,7 @@ import sys
 from cvc_balance.cli.arguments import EXIT_BAD_INPUT, EXIT_FAILURE
 from cvc_balance.physics.layout import LayoutError, one_line
 
-COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'field', 'bench')
+COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'field', 'fleet', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
 
 

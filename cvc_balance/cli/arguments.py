@@ -71,6 +71,15 @@ def topic_name(text):
     return text
 
 
+def machine_id(text):
+    """Parse a machine id (argparse type; :func:`cvc_balance.bag.machine.check_machine_id`)."""
+    from cvc_balance.bag.machine import check_machine_id
+    try:
+        return check_machine_id(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 BAG_HELP = 'a bag: .mcap or .db3 file, or rosbag2 directory (metadata.yaml and its files)'
 OUTPUT_BAG_HELP = ('bag to write: a .mcap file, or any other name for a rosbag2 directory '
                    '(as ros2 bag record -o)')

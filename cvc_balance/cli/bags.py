@@ -8,7 +8,8 @@ import argparse
 import sys
 
 from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, finite, input_topics,
-                                       OUTPUT_BAG_HELP, positive, staged_outputs, tolerance)
+                                       machine_id, OUTPUT_BAG_HELP, positive, print_json,
+                                       staged_outputs, tolerance)
 from cvc_balance.files import check_output
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import MAX_STAMP_JUMP
@@ -21,6 +22,9 @@ def register(commands):
                                    'from a scenario file (speed profile, noise, layout changes).')
     simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
     simulate.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
+    simulate.add_argument('--machine-id', type=machine_id, metavar='ID',
+                          help='the machine the run is recorded on, written into the bag '
+                          '(MCAP metadata; metadata.yaml custom_data for a directory)')
     simulate.set_defaults(run=_simulate)
 
     replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
@@ -44,6 +48,9 @@ def register(commands):
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
     replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
+    replay.add_argument('--json', action='store_true',
+                        help='print the summary as one JSON object (README "Bags"); with '
+                        'load cells in the bag, each segment\'s identified unbalance too')
     replay.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
                         help='largest change accepted in the forces (N), moments (N m) and '
                         'drive torque (N m), inf for an output not asked: each layout takes '
@@ -92,6 +99,9 @@ def register(commands):
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
     record.add_argument('--chunk-kib', type=count, default=1024, metavar='K',
                         help='chunk size; a killed recorder loses at most one chunk')
+    record.add_argument('--machine-id', type=machine_id, metavar='ID',
+                        help='the machine recorded, written into the bag (MCAP metadata; '
+                        'metadata.yaml custom_data for a directory)')
     record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
                         help='print "ready" once this topic\'s publisher is matched')
     record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
@@ -103,7 +113,7 @@ def _simulate(args):
     from cvc_balance.bag.scenario import load_scenario, write_bag
     with staged_outputs([args.scenario], bags=('bag',), bag=args.output) as out:
         scenario = load_scenario(args.scenario)
-        count = write_bag(scenario, out['bag'])
+        count = write_bag(scenario, out['bag'], machine_id=args.machine_id)
     print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
           f'{len(scenario.layouts)} layouts')
     return 0
@@ -125,6 +135,17 @@ def _replay(args):
             _log_cells(args, logger)
             logger.finish()
     summary.output = args.output or ''
+    if args.json:
+        from cvc_balance.bag.identify_run import identify_bag
+        from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
+        from cvc_balance.bag.run_summary import has_load_cells, replay_record
+        identified = identify_bag(args.bag, args.layout_file, args.joint_name,
+                                  time_constant=args.alpha_time_constant,
+                                  max_speed=args.max_speed, names=input_topics(args))[0] \
+            if has_load_cells(args.bag) else None
+        print_json(replay_record(summary, identified,
+                                 bag_custom_data(args.bag).get(MACHINE_ID)))
+        return 0
     print(format_summary(summary))
     return 0
 

@@ -6,11 +6,9 @@ layout's, the residual (what the layout does not know) with 95 % radii, and the 
 a table for people or, with ``--json``, one object (README "Monitor the real rotor").
 """
 
-import math
-
+from cvc_balance.bag.run_summary import identified_summary as segment_summary
 from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, input_topics,
                                        print_json)
-from cvc_balance.physics.frames import degrees
 
 
 def register(commands):
@@ -43,36 +41,6 @@ def run(args):
     else:
         print(format_table(summary))
     return 0
-
-
-def _vector(vector, unit_scale, unit):
-    ci = vector.ci95 * unit_scale if math.isfinite(vector.ci95) else None
-    return {unit: vector.amount * unit_scale, 'angle_deg': degrees(vector.angle),
-            f'ci95_{unit}': ci}
-
-
-def unbalance_summary(unbalance):
-    """Return a RotorUnbalance as JSON-able data: kg m, kg m^2, g mm; degrees."""
-    return {'static_unbalance': _vector(unbalance.static, 1.0, 'kg_m'),
-            'couple_unbalance': _vector(unbalance.couple, 1.0, 'kg_m2'),
-            'planes': [{'z': z, **_vector(v, 1e6, 'g_mm')} for z, v in unbalance.planes]}
-
-
-def segment_summary(segment):
-    """Return an IdentifiedSegment as JSON-able data (schema in the README)."""
-    estimate = segment.estimate
-    return {
-        'layout': {'name': segment.layout.name, 'digest': segment.layout.digest()},
-        'from': segment.start_ns * 1e-9, 'to': segment.end_ns * 1e-9,
-        'samples': segment.samples, 'readings': segment.readings, 'dropped': segment.dropped,
-        'revolutions': segment.revolutions, 'identifiable': estimate.identifiable,
-        'identified': unbalance_summary(segment.identified),
-        'layout_prediction': unbalance_summary(segment.declared),
-        'residual': unbalance_summary(segment.residual),
-        'fit': {'rms_N': estimate.sigma * math.sqrt(2) if estimate.identifiable else None,
-                'sigma_N': estimate.sigma if estimate.identifiable else None,
-                'biases_N': [[b.real, b.imag] for b in estimate.biases]},
-    }
 
 
 def format_table(summary):

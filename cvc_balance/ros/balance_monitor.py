@@ -92,6 +92,9 @@ PARAMETERS = (
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
      'no recording', None),
+    ('machine_id', '', 'the machine monitored (serial number, asset tag), written into the '
+     "recording (MCAP metadata, metadata.yaml custom_data) for cvc-balance fleet; empty: "
+     'none', None),
     ('rerun', '', 'rerun view of the run: save (to rerun_target, an .rrd), connect (to the '
      'viewer at rerun_target) or spawn (a viewer); empty: off', None),
     ('rerun_target', '', '.rrd path (save) or viewer URL (connect)', None),
@@ -197,7 +200,8 @@ class BalanceMonitor(Node):
             # they are published (no second trip through DDS).
             self._recorder = BagRecorder(self, self.params['record_path'],
                                          (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT,
-                                          topics.measured_load('*'), topics.DIAGNOSTICS))
+                                          topics.measured_load('*'), topics.DIAGNOSTICS),
+                                         machine_id=self.params['machine_id'] or None)
             for topic in topics.OUTPUTS:
                 self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
         if self.params['layout_file']:

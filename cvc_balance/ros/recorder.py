@@ -14,6 +14,7 @@ import importlib
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from cvc_balance.bag.machine import custom_data
 from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
 from cvc_balance.ros.executor import spin
@@ -36,14 +37,16 @@ class BagRecorder:
     """Record topics of a node's graph to ``path`` (see the module's description)."""
 
     def __init__(self, node, path, names=DEFAULT_TOPICS, compression='zstd',
-                 chunk_bytes=1 << 20):
+                 chunk_bytes=1 << 20, machine_id=None):
         """
         Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``.
 
-        ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``).
+        ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``);
+        ``machine_id``: the machine recorded, written into the bag (``bag.machine``).
         """
         self.node = node
-        self.writer = open_writer(path, compression=compression, chunk_bytes=chunk_bytes)
+        self.writer = open_writer(path, compression=compression, chunk_bytes=chunk_bytes,
+                                  custom_data=custom_data(machine_id))
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
@@ -128,7 +131,7 @@ def record_main(args):
     node = rclpy.create_node('cvc_balance_recorder')
     recorder = BagRecorder(node, args.output, args.topics or DEFAULT_TOPICS,
                            '' if args.compression == 'none' else args.compression,
-                           args.chunk_kib * 1024)
+                           args.chunk_kib * 1024, args.machine_id)
     if args.ready_when:
         # Say 'ready' once the subscriptions have matched a publisher (reader side).
         wanted = [recorder.subscription(node.resolve_topic_name(t)) for t in args.ready_when]

@@ -1,0 +1,56 @@
+"""
+The bags under some paths: ``.mcap`` and ``.db3`` files, and rosbag2 directories.
+
+A directory holding ``metadata.yaml`` is one bag (its split files are not bags of their
+own); any other directory is searched, files and folders in name order, hidden ones
+(a leading ``.``) and symbolic links to directories skipped. A path given that is itself a
+bag file or a rosbag2 directory is taken as it is, whatever its suffix.
+"""
+
+import os
+from pathlib import Path
+
+from cvc_balance.bag.rosbag2 import METADATA
+
+BAG_SUFFIXES = ('.mcap', '.db3')
+
+
+def is_bag_directory(path):
+    """Tell whether ``path`` is a rosbag2 directory (it holds metadata.yaml)."""
+    return (Path(path) / METADATA).is_file()
+
+
+def find_bags(paths):
+    """
+    Return [(bag path, root)] under ``paths`` (files or folders), each bag once, in order.
+
+    ``root`` is the path given that the bag was found under (for the machine's name when
+    the bag does not carry one, :func:`cvc_balance.bag.machine.machine_of`). A path that
+    does not exist raises FileNotFoundError naming it.
+    """
+    found, seen = [], set()
+
+    def add(bag, root):
+        key = os.path.realpath(bag)
+        if key not in seen:
+            seen.add(key)
+            found.append((Path(bag), Path(root)))
+
+    for given in paths:
+        root = Path(given)
+        if not root.exists():
+            raise FileNotFoundError(f'{given}: no such file or directory')
+        if root.is_file() or is_bag_directory(root):
+            add(root, root.parent)
+            continue
+        for directory, folders, files in os.walk(root):
+            here = Path(directory)
+            bags = sorted(f for f in folders if not f.startswith('.')
+                          and is_bag_directory(here / f))
+            folders[:] = sorted(f for f in folders if not f.startswith('.') and f not in bags)
+            entries = sorted([(name, True) for name in bags]
+                             + [(name, False) for name in files
+                                if not name.startswith('.') and name.endswith(BAG_SUFFIXES)])
+            for name, _ in entries:
+                add(here / name, root)
+    return found
