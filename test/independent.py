@@ -6,15 +6,22 @@ model of a layout mapping once (as :func:`reference.pinocchio_model` does) and g
 per motion sample, the load on the stator and the drive torque by RNEA; the split of a
 load over the supports is solved as a linear system of the statics (force and moment
 balance about O, the axial force on the support marked axial), not by the engine's
-formulas; the unbalance comes from Pinocchio's own mass properties.
+formulas; the unbalance comes from Pinocchio's own mass properties. Input bags carry
+exact motions (:func:`ramp`) in messages serialised by rosbags; outputs are read back
+with rosbags.
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from rosbags.typesys import get_typestore, Stores
 
+from cvc_balance.bag.mcap_writer import BagWriter
 from reference import pinocchio_model
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 class PinocchioRotor:
@@ -101,3 +108,54 @@ def tilted(tilt_deg):
     """Gravity of a gantry tilted by ``tilt_deg`` about stator X, m/s^2 (stator frame)."""
     tilt = math.radians(tilt_deg)
     return [0.0, -9.80665 * math.cos(tilt), 9.80665 * math.sin(tilt)]
+
+
+def write_input_bag(path, stamps, angle, omega, layouts=(), names=('gantry_joint',)):
+    """
+    Write an input bag: messages serialised by rosbags, in the project's MCAP writer.
+
+    ``layouts``: (log time ns, layout text) pairs on /layout. (Files from other MCAP
+    writers keep their channels inside chunks, which the bag reader does not read yet:
+    issue 11.)
+    """
+    joint_type, string_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
+    with BagWriter(path, chunk_bytes=8192) as writer:
+        joints = writer.add_channel('/joint_states', joint_type, best_effort=True)
+        layout = writer.add_channel('/layout', string_type, latched=True)
+        for log_time, text in layouts:
+            writer.write(layout, int(log_time), TYPESTORE.serialize_cdr(
+                TYPESTORE.types[string_type](data=text), string_type).tobytes())
+        state = TYPESTORE.types[joint_type]
+        header = TYPESTORE.types['std_msgs/msg/Header']
+        stamp_type = TYPESTORE.types['builtin_interfaces/msg/Time']
+        for ns, q, w in zip(stamps, angle, omega):
+            msg = state(header=header(stamp=stamp_type(sec=int(ns) // 10**9,
+                                                       nanosec=int(ns) % 10**9),
+                                      frame_id=''),
+                        name=list(names), position=np.array([q]), velocity=np.array([w]),
+                        effort=np.array([], dtype=float))
+            writer.write(joints, int(ns), TYPESTORE.serialize_cdr(msg, joint_type).tobytes())
+    return path
+
+
+def read_outputs(path):
+    """{topic: {stamp ns: [fx, fy, fz, tx, ty, tz]}} by rosbags."""
+    from rosbags.highlevel import AnyReader
+    out = {}
+    with AnyReader([Path(path)]) as reader:
+        for connection, _, raw in reader.messages():
+            if connection.msgtype != 'geometry_msgs/msg/WrenchStamped':
+                continue
+            msg = reader.deserialize(raw, connection.msgtype)
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            w = msg.wrench
+            out.setdefault(connection.topic, {})[stamp] = [
+                w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
+    return out
+
+
+def ramp(omega0, alpha, rate=200.0, seconds=4.0):
+    """Exact motion from angle 0: stamps (ns), angle (wrapped), omega."""
+    t = np.arange(int(seconds * rate)) / rate
+    angle = np.remainder(omega0 * t + 0.5 * alpha * t * t + math.pi, 2 * math.pi) - math.pi
+    return 5 * 10**9 + np.round(t * 1e9).astype(np.int64), angle, omega0 + alpha * t

@@ -13,14 +13,12 @@ Edges no test reached before a mutation run showed them (issue 18), against refe
 """
 
 import math
-from pathlib import Path
 
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message
 from mcap.stream_reader import breakup_chunk, StreamReader
 import numpy as np
 import pytest
-from rosbags.typesys import get_typestore, Stores
 
 from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.bag.replay import replay
@@ -31,11 +29,8 @@ from cvc_balance.physics.layout import LayoutError, parse_layout
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import accepted_samples, sample_problem
 from cvc_balance.study.exact import basis_wrenches, BASIS
-from independent import PinocchioRotor, tilted
+from independent import PinocchioRotor, ramp, read_outputs, tilted, write_input_bag
 from reference import random_layout
-
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-
 
 # -- each support, not only the total -------------------------------------------------
 
@@ -263,56 +258,6 @@ LAYOUT = {
     'supports': [{'name': 'front', 'z': -0.3}, {'name': 'rear', 'z': 0.3, 'axial': True}]}
 
 
-def write_input_bag(path, stamps, angle, omega, layout_text=None, names=('gantry_joint',)):
-    """
-    Write an input bag: messages serialised by rosbags, in the project's MCAP writer.
-
-    (Files from other MCAP writers keep their channels inside chunks, which the bag
-    reader does not read yet: issue 11.)
-    """
-    joint_type, string_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
-    with BagWriter(path, chunk_bytes=8192) as writer:
-        joints = writer.add_channel('/joint_states', joint_type, best_effort=True)
-        if layout_text is not None:
-            layout = writer.add_channel('/layout', string_type, latched=True)
-            writer.write(layout, int(stamps[0]) - 1_000_000, TYPESTORE.serialize_cdr(
-                TYPESTORE.types[string_type](data=layout_text), string_type).tobytes())
-        state = TYPESTORE.types[joint_type]
-        header = TYPESTORE.types['std_msgs/msg/Header']
-        stamp_type = TYPESTORE.types['builtin_interfaces/msg/Time']
-        for ns, q, w in zip(stamps, angle, omega):
-            msg = state(header=header(stamp=stamp_type(sec=int(ns) // 10**9,
-                                                       nanosec=int(ns) % 10**9),
-                                      frame_id=''),
-                        name=list(names), position=np.array([q]), velocity=np.array([w]),
-                        effort=np.array([], dtype=float))
-            writer.write(joints, int(ns), TYPESTORE.serialize_cdr(msg, joint_type).tobytes())
-    return path
-
-
-def read_outputs(path):
-    """{topic: {stamp ns: [fx, fy, fz, tx, ty, tz]}} by rosbags."""
-    from rosbags.highlevel import AnyReader
-    out = {}
-    with AnyReader([Path(path)]) as reader:
-        for connection, _, raw in reader.messages():
-            if connection.msgtype != 'geometry_msgs/msg/WrenchStamped':
-                continue
-            msg = reader.deserialize(raw, connection.msgtype)
-            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-            w = msg.wrench
-            out.setdefault(connection.topic, {})[stamp] = [
-                w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
-    return out
-
-
-def ramp(omega0, alpha, rate=200.0, seconds=4.0):
-    """Exact motion from angle 0: stamps (ns), angle (wrapped), omega."""
-    t = np.arange(int(seconds * rate)) / rate
-    angle = np.remainder(omega0 * t + 0.5 * alpha * t * t + math.pi, 2 * math.pi) - math.pi
-    return 5 * 10**9 + np.round(t * 1e9).astype(np.int64), angle, omega0 + alpha * t
-
-
 def test_replay_takes_alpha_from_accepted_samples_only(tmp_path):
     """
     Rejected samples do not enter alpha.
@@ -334,7 +279,7 @@ def test_replay_takes_alpha_from_accepted_samples_only(tmp_path):
     angle_in.insert(300, 0.0)
     omega_in.insert(300, 4.0)
     bag = write_input_bag(tmp_path / 'in.mcap', stamps_in, angle_in, omega_in,
-                          yaml.safe_dump(LAYOUT))
+                          [(stamps[0] - 1_000_000, yaml.safe_dump(LAYOUT))])
     summary = replay(bag, tmp_path / 'out.mcap')
     assert summary.rejected == 4 and summary.accepted == len(stamps)
     got = read_outputs(tmp_path / 'out.mcap')
@@ -363,7 +308,8 @@ def test_replay_tolerance_envelope_covers_slowing_down_and_spinning_backwards(
     import yaml
     own_zz = 300.0 * (0.6**2 + 0.7**2) / 2 + 40.0 * (3 * 0.1**2 + 0.3**2) / 12
     stamps, angle, omega = ramp(omega0, alpha, seconds=8.0)
-    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega, yaml.safe_dump(LAYOUT))
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1_000_000, yaml.safe_dump(LAYOUT))])
     tolerance = Tolerance(math.inf, math.inf, 0.5 * abs(alpha) * own_zz)
     summary = replay(bag, tmp_path / 'out.mcap', tolerance=tolerance)
     (segment,) = summary.segments
