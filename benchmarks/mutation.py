@@ -33,7 +33,8 @@ PHYSICS = ['test/test_pinocchio.py', 'test/test_thesis.py', 'test/test_propertie
            'test/test_pipeline_reference.py', 'test/test_edge_cases.py']
 MODULES = {
     # name: (module file, tests that guard it)
-    'engine': ('cvc_balance/physics/engine.py', PHYSICS + ['test/test_model_choice.py']),
+    'engine': ('cvc_balance/physics/engine.py',
+               PHYSICS + ['test/test_model_choice.py', 'test/test_methods.py']),
     'layout': ('cvc_balance/physics/layout.py',
                ['test/test_layout.py', 'test/test_edge_cases.py',
                 'test/test_unbalance.py']),

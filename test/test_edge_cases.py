@@ -15,7 +15,8 @@ Edges no test reached before a mutation run showed them (issue 18), against refe
 import math
 
 from mcap.reader import make_reader
-from mcap.records import Chunk, Message
+from mcap.records import Chunk, Message, MessageIndex
+from rosbags.typesys import get_typestore, Stores
 from mcap.stream_reader import breakup_chunk, StreamReader
 import numpy as np
 import pytest
@@ -29,8 +30,11 @@ from cvc_balance.physics.layout import LayoutError, parse_layout
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import accepted_samples, sample_problem
 from cvc_balance.study.exact import basis_wrenches, BASIS
-from independent import PinocchioRotor, ramp, read_outputs, tilted, write_input_bag
+from independent import (PinocchioRotor, ramp, read_outputs, split_by_hand, tilted,
+                         write_input_bag)
 from reference import random_layout
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 # -- each support, not only the total -------------------------------------------------
 
@@ -113,6 +117,69 @@ def test_every_sample_of_several_blocks():
         for name, (f, m) in one.supports.items():
             np.testing.assert_allclose(result.support_force[name][i], f, rtol=1e-13,
                                        atol=1e-13 * np.abs(f).max())
+
+
+def test_planar_models_put_no_moment_on_the_bearings():
+    """
+    A model without the moment terms (model_choice's planar ones): M_x = M_y = 0, exactly.
+
+    Then two supports share the force by their distances only, and a single one carries a
+    tilting moment of its force alone: (z F_y, -z F_x, 0) about its point (by hand).
+    """
+    mapping = random_layout(np.random.default_rng(9), n=5, supports=2, every_kind=True)
+    mapping['gravity'] = tilted(25.0)
+    one = dict(mapping, supports=[{'name': 'slewing', 'z': 0.12}])
+    rng = np.random.default_rng(10)
+    q, omega, alpha = rng.uniform(-7, 7, 6), rng.uniform(-40, 40, 6), rng.uniform(-30, 30, 6)
+    for layout in (mapping, one):
+        for own in (True, False):
+            model = RotorModel.from_layout(parse_layout(layout), own_inertia=own,
+                                           moments=False)
+            assert (model.own_inertia, model.moments) == (own, False)
+            many = loads(model, q, omega, alpha)
+            for k in range(len(q)):
+                single = sample_loads(model, q[k], omega[k], alpha[k])
+                for moment in (single.moment_rotor, single.moment_stator,
+                               many.moment_rotor[k], many.moment_stator[k]):
+                    assert tuple(moment) == (0.0, 0.0, 0.0)
+                force = np.asarray(single.force_stator)
+                expected = split_by_hand(layout['supports'], force, np.zeros(3))
+                for name, (f, m) in expected.items():
+                    for got_force, got_moment in (single.supports[name],
+                                                  (many.support_force[name][k],
+                                                   many.support_moment[name][k])):
+                        np.testing.assert_allclose(got_force, f, rtol=0,
+                                                   atol=1e-15 * np.abs(f).max())
+                        np.testing.assert_allclose(got_moment, m, rtol=0,
+                                                   atol=1e-15 * np.abs(force).max())
+
+
+def test_alpha_defaults_to_zero_and_constant_outputs_are_kept():
+    """
+    Without alpha, the loads at alpha = 0 (Pinocchio's); an axial force of exactly 1 N.
+
+    One kilogram under gravity (0, -9, 1) m/s^2: f_z is the constant 1.0 N in every sample
+    of the vectorised path (a constant is written once, not per sample).
+    """
+    layout = {'name': 'one_kg', 'gravity': [0.0, -9.0, 1.0],
+              'components': [{'name': 'm', 'mass': 1.0, 'radius': 0.5, 'angle': 0.4,
+                              'z': 0.2}],
+              'supports': [{'name': 'front', 'z': -0.3},
+                           {'name': 'rear', 'z': 0.3, 'axial': True}]}
+    model = RotorModel.from_layout(parse_layout(layout))
+    rotor = PinocchioRotor(layout)
+    q, omega = np.array([0.3, 2.0, -1.0]), np.array([10.0, -4.0, 0.0])
+    many = loads(model, q, omega)
+    for k in range(len(q)):
+        ref = rotor.loads(q[k], omega[k], 0.0)
+        single = sample_loads(model, q[k], omega[k])
+        for got in (single.force_stator, many.force_stator[k]):
+            np.testing.assert_allclose(got, ref['force'], rtol=0, atol=1e-14 * 50.0)
+        for got in (single.drive_torque, many.drive_torque[k]):
+            assert abs(got - ref['drive_torque']) <= 1e-14 * 5.0
+    assert many.force_stator[:, 2].tolist() == [1.0, 1.0, 1.0]
+    assert many.support_force['rear'][:, 2].tolist() == [1.0, 1.0, 1.0]
+    assert many.support_force['front'][:, 2].tolist() == [0.0, 0.0, 0.0]
 
 
 # -- layouts ---------------------------------------------------------------------------
@@ -243,6 +310,123 @@ def test_chunk_records_span_their_messages(compression, tmp_path):
         every = [m.log_time for _, _, m in reader.iter_messages(log_time_order=False)]
         assert summary.statistics.message_start_time == min(every)
         assert summary.statistics.message_end_time == max(every)
+
+
+def write_every_way(path, compression):
+    """
+    A bag written both ways: per message (live recording) and in blocks (replay).
+
+    Returns {topic: [(log time, bytes)]} as written (for /w: the fields set, as CDR padding
+    is not defined).
+    """
+    written = {'/note': [], '/w': [], '/js': []}
+    with BagWriter(path, compression=compression, chunk_bytes=3000) as writer:
+        note = writer.add_channel('/note', 'std_msgs/msg/String', latched=True)
+        wrench = writer.add_channel('/w', 'geometry_msgs/msg/WrenchStamped')
+        joints = writer.add_channel('/js', 'sensor_msgs/msg/JointState', best_effort=True)
+        for k in range(60):
+            data = string_message(f'note {k} ' + 'x' * (k % 7))
+            writer.write(note, 10**9 + 10**6 * k, data)
+            written['/note'].append((10**9 + 10**6 * k, data))
+        block = writer.block([(wrench, wrench_stamped_layout('stator'))])
+        stamps = 2 * 10**9 + 10**6 * np.arange(2 * block.n + 3)
+        for a in range(0, len(stamps), block.n):
+            b = min(a + block.n, len(stamps))
+            block.put(['0.sec'], stamps[a:b] // 10**9, b - a)
+            block.put(['0.nanosec'], stamps[a:b] % 10**9, b - a)
+            block.put(['0.force_x', '0.force_y', '0.force_z'],
+                      [stamps[a:b] * 1e-9, -stamps[a:b] * 1e-9, 0.5 + 0 * stamps[a:b]], b - a)
+            writer.write_block(block, stamps[a:b], b - a)
+            written['/w'] += [(int(t), (int(t) // 10**9, int(t) % 10**9, t * 1e-9, -t * 1e-9,
+                                        0.5)) for t in stamps[a:b]]
+        for k in range(5):
+            data = TYPESTORE.serialize_cdr(TYPESTORE.types['sensor_msgs/msg/JointState'](
+                header=TYPESTORE.types['std_msgs/msg/Header'](
+                    stamp=TYPESTORE.types['builtin_interfaces/msg/Time'](sec=3, nanosec=k),
+                    frame_id=''),
+                name=['j'], position=np.array([0.1 * k]), velocity=np.array([1.0]),
+                effort=np.array([], float)), 'sensor_msgs/msg/JointState').tobytes()
+            writer.write(joints, 3 * 10**9 + k, data)
+            written['/js'].append((3 * 10**9 + k, data))
+    return written
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', ''])
+def test_written_bags_are_read_through_their_indexes_by_the_mcap_library(compression,
+                                                                         tmp_path):
+    """
+    The mcap library's indexed reader (chunk indexes, message indexes, summary), CRCs
+    validated: every message as written, the statistics' counts and times, the QoS of
+    latched and best-effort channels as rosbag2 writes them.
+    """
+    path = tmp_path / 'every_way.mcap'
+    written = write_every_way(path, compression)
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, validate_crcs=True)
+        summary = reader.get_summary()
+        got = {}
+        for _, channel, message in reader.iter_messages(log_time_order=True):
+            data = message.data
+            if channel.topic == '/w':
+                w = TYPESTORE.deserialize_cdr(data, 'geometry_msgs/msg/WrenchStamped')
+                data = (w.header.stamp.sec, w.header.stamp.nanosec, w.wrench.force.x,
+                        w.wrench.force.y, w.wrench.force.z)
+            got.setdefault(channel.topic, []).append((message.log_time, data))
+            assert message.publish_time == message.log_time
+        assert got == written
+        counts = {summary.channels[c].topic: n
+                  for c, n in summary.statistics.channel_message_counts.items()}
+        assert counts == {topic: len(m) for topic, m in written.items()}
+        assert summary.statistics.message_count == sum(len(m) for m in written.values())
+        assert summary.statistics.chunk_count == len(summary.chunk_indexes)
+        assert summary.statistics.channel_count == 3 and summary.statistics.schema_count == 3
+        every = [t for m in written.values() for t, _ in m]
+        assert (summary.statistics.message_start_time,
+                summary.statistics.message_end_time) == (min(every), max(every))
+        assert {i.compression for i in summary.chunk_indexes} == {compression}
+        qos = {c.topic: yaml_qos(c.metadata['offered_qos_profiles'])
+               for c in summary.channels.values()}
+        assert qos['/note'] == (1, 1)        # reliable, transient local (latched)
+        assert qos['/w'] == (1, 2)           # reliable, volatile
+        assert qos['/js'] == (2, 2)          # best effort, volatile
+        assert reader.get_header().profile == 'ros2'
+        assert {s.encoding for s in summary.schemas.values()} == {'ros2msg'}
+    # Message indexes: each entry points at its message record in the decompressed chunk.
+    with open(path, 'rb') as stream:
+        records = list(StreamReader(stream, emit_chunks=True, validate_crcs=True).records)
+    checked = 0
+    for k, record in enumerate(records):
+        if not isinstance(record, Chunk):
+            continue
+        inner = [r for r in breakup_chunk(record, validate_crc=True)]
+        offsets = {}
+        position = 0
+        for r in inner:
+            offsets[position] = r
+            position += 9 + len(_record_bytes(r))
+        for index in records[k + 1:]:
+            if not isinstance(index, MessageIndex):
+                break
+            for log_time, offset in index.records:
+                message = offsets[offset]
+                assert isinstance(message, Message)
+                assert (message.channel_id, message.log_time) == (index.channel_id, log_time)
+                checked += 1
+    assert checked == sum(len(m) for m in written.values())
+
+
+def _record_bytes(record):
+    from mcap.data_stream import RecordBuilder
+    builder = RecordBuilder()
+    record.write(builder)
+    return builder.end()[9:]
+
+
+def yaml_qos(text):
+    """(reliability, durability) of the first offered QoS profile."""
+    import yaml
+    profile = yaml.safe_load(text)[0]
+    return profile['reliability'], profile['durability']
 
 
 # -- replay: rejected samples and runs that slow down ---------------------------------
