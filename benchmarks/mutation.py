@@ -36,8 +36,8 @@ MODULES = {
     'engine': ('cvc_balance/physics/engine.py',
                PHYSICS + ['test/test_model_choice.py', 'test/test_methods.py']),
     'layout': ('cvc_balance/physics/layout.py',
-               ['test/test_layout.py', 'test/test_edge_cases.py',
-                'test/test_unbalance.py']),
+               ['test/test_layout.py', 'test/test_layout_messages.py',
+                'test/test_edge_cases.py', 'test/test_unbalance.py']),
     'inertia': ('cvc_balance/physics/inertia.py', PHYSICS + ['test/test_stability.py']),
     'compensated': ('cvc_balance/physics/compensated.py',
                     ['test/test_stability.py', 'test/test_pinocchio.py']),
@@ -68,6 +68,14 @@ DESELECT = [
     # modules through other processes, which mutmut's test selection cannot see.
     'test/test_bags.py::test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk',
     'test/test_bags.py::test_rerun_opens_a_project_bag',
+    # The command line's refusals start a process per case (about 1 s each, for each of
+    # layout.py's 760 mutants): test_layout_messages.py has their in-process half, every
+    # message in full.
+    'test/test_layout.py::test_bad_layout_gets_one_line_and_exit_code_2',
+    'test/test_layout.py::test_yaml_nan_is_rejected',
+    'test/test_layout.py::test_unreadable_and_malformed_files',
+    'test/test_layout.py::test_bad_speed_on_the_command_line',
+    'test/test_layout.py::test_solve_table_names_every_support_and_the_verdict',
 ]
 COPY = ('cvc_balance', 'test', 'config', 'bags', 'docs', 'resource', 'pytest.ini',
         'package.xml', 'setup.py', 'setup.cfg')

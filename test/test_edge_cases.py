@@ -36,6 +36,7 @@ from reference import random_layout
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
+
 # -- each support, not only the total -------------------------------------------------
 
 @pytest.mark.parametrize('seed', range(12))
@@ -314,7 +315,7 @@ def test_chunk_records_span_their_messages(compression, tmp_path):
 
 def write_every_way(path, compression):
     """
-    A bag written both ways: per message (live recording) and in blocks (replay).
+    Write a bag both ways: per message (live recording) and in blocks (replay).
 
     Returns {topic: [(log time, bytes)]} as written (for /w: the fields set, as CDR padding
     is not defined).
@@ -355,9 +356,10 @@ def write_every_way(path, compression):
 def test_written_bags_are_read_through_their_indexes_by_the_mcap_library(compression,
                                                                          tmp_path):
     """
-    The mcap library's indexed reader (chunk indexes, message indexes, summary), CRCs
-    validated: every message as written, the statistics' counts and times, the QoS of
-    latched and best-effort channels as rosbag2 writes them.
+    The mcap library's indexed reader finds every message as written.
+
+    Chunk indexes, message indexes and summary, CRCs validated; the statistics' counts and
+    times; the QoS of latched and best-effort channels as rosbag2 writes them.
     """
     path = tmp_path / 'every_way.mcap'
     written = write_every_way(path, compression)

@@ -45,7 +45,7 @@ BASE = {
 
 
 def layouts():
-    """The three layouts of the run and the time (s from the start) each takes over."""
+    """Return the three layouts of the run and when (s from the start) each takes over."""
     heavier = copy.deepcopy(BASE)
     heavier['components'][1]['mass'] = 63.0
     tilted_run = copy.deepcopy(heavier)
@@ -55,7 +55,7 @@ def layouts():
 
 @pytest.fixture(scope='module')
 def run(tmp_path_factory):
-    """The input bag (an exact ramp, 8 s at 200 Hz) and, per sample, layout and motion."""
+    """Make the input bag (an exact ramp, 8 s at 200 Hz); give per sample layout and motion."""
     folder = tmp_path_factory.mktemp('pipeline')
     stamps, angle, omega = ramp(0.5, ALPHA, rate=200.0, seconds=8.0)
     start = int(stamps[0])
@@ -151,8 +151,9 @@ def read_rrd_scalars(path):
 
 def test_rerun_view_plots_pinocchio_values(run, tmp_path):
     """
-    ``cvc-balance view`` of the run: omega, alpha, drive torque, each support's load and
-    the unbalance per correction plane, every sample.
+    ``cvc-balance view`` plots Pinocchio's values, every sample.
+
+    Omega, alpha, drive torque, each support's load and the unbalance per correction plane.
 
     Measured, of each plot's peak: omega 0, alpha 3.8e-13 (the estimator on a ramp),
     drive torque 3.0e-13, support loads up to 2.4e-15 (axial: 3.2e-16 and exactly 0 on

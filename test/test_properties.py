@@ -77,14 +77,18 @@ def test_turning_the_layout_turns_its_rotor_frame_loads(parts, motion, d_theta):
     # Without gravity, at the same rotor angle.
     base = sample_loads(model_of(parts, ZERO_G), q, omega, alpha)
     moved = sample_loads(model_of(turned, ZERO_G), q, omega, alpha)
-    assert np.allclose(moved.force_rotor, turn(base.force_rotor, d_theta), rtol=0.0, atol=tolerance)
-    assert np.allclose(moved.moment_rotor, turn(base.moment_rotor, d_theta), rtol=0.0, atol=tolerance)
+    assert np.allclose(moved.force_rotor, turn(base.force_rotor, d_theta),
+                       rtol=0.0, atol=tolerance)
+    assert np.allclose(moved.moment_rotor, turn(base.moment_rotor, d_theta),
+                       rtol=0.0, atol=tolerance)
     assert math.isclose(moved.drive_torque, base.drive_torque, rel_tol=0.0, abs_tol=tolerance)
     # With gravity, the rotor turned back by d_theta sees gravity turned by d_theta too.
     base = sample_loads(model_of(parts), q, omega, alpha)
     moved = sample_loads(model_of(turned), q - d_theta, omega, alpha)
-    assert np.allclose(moved.force_rotor, turn(base.force_rotor, d_theta), rtol=0.0, atol=tolerance)
-    assert np.allclose(moved.moment_rotor, turn(base.moment_rotor, d_theta), rtol=0.0, atol=tolerance)
+    assert np.allclose(moved.force_rotor, turn(base.force_rotor, d_theta),
+                       rtol=0.0, atol=tolerance)
+    assert np.allclose(moved.moment_rotor, turn(base.moment_rotor, d_theta),
+                       rtol=0.0, atol=tolerance)
     assert math.isclose(moved.drive_torque, base.drive_torque, rel_tol=0.0, abs_tol=tolerance)
 
 

@@ -93,8 +93,8 @@ def test_plane_allocation_for_a_rotor_between_bearings():
     # Measured: equal to the last bit.
     assert iso21940.plane_shares(0.0, -0.5, 0.5) == pytest.approx((0.5, 0.5), rel=1e-15)
     assert iso21940.plane_shares(-0.1, -0.5, 0.5) == pytest.approx((0.6, 0.4), rel=1e-15)
-    assert iso21940.plane_shares(-0.45, -0.5, 0.5) == pytest.approx((0.7, 0.3),   # clamped
-                                                                     rel=1e-15)
+    clamped = iso21940.plane_shares(-0.45, -0.5, 0.5)
+    assert clamped == pytest.approx((0.7, 0.3), rel=1e-15)
 
 
 def test_equivalent_and_finest_grade():
