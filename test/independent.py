@@ -114,17 +114,25 @@ def write_input_bag(path, stamps, angle, omega, layouts=(), names=('gantry_joint
     """
     Write an input bag: messages serialised by rosbags, in the project's MCAP writer.
 
-    ``layouts``: (log time ns, layout text) pairs on /layout. (Files from other MCAP
+    ``layouts``: (log time ns, layout text) pairs on /layout. ``angle`` None: speed only,
+    std_msgs/Float64 on /speed with the stamps as log times. (Files from other MCAP
     writers keep their channels inside chunks, which the bag reader does not read yet:
     issue 11.)
     """
     joint_type, string_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
     with BagWriter(path, chunk_bytes=8192) as writer:
-        joints = writer.add_channel('/joint_states', joint_type, best_effort=True)
         layout = writer.add_channel('/layout', string_type, latched=True)
         for log_time, text in layouts:
             writer.write(layout, int(log_time), TYPESTORE.serialize_cdr(
                 TYPESTORE.types[string_type](data=text), string_type).tobytes())
+        if angle is None:
+            speed_type = 'std_msgs/msg/Float64'
+            speed = writer.add_channel('/speed', speed_type, best_effort=True)
+            for ns, w in zip(stamps, omega):
+                writer.write(speed, int(ns), TYPESTORE.serialize_cdr(
+                    TYPESTORE.types[speed_type](data=float(w)), speed_type).tobytes())
+            return path
+        joints = writer.add_channel('/joint_states', joint_type, best_effort=True)
         state = TYPESTORE.types[joint_type]
         header = TYPESTORE.types['std_msgs/msg/Header']
         stamp_type = TYPESTORE.types['builtin_interfaces/msg/Time']

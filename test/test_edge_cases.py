@@ -543,3 +543,36 @@ def test_replay_tolerance_envelope_covers_slowing_down_and_spinning_backwards(
     point = Tolerance(math.inf, math.inf, 2.0 * abs(alpha) * own_zz)
     summary = replay(bag, tolerance=point)
     assert summary.segments[0].choice.name == 'point masses, planar'
+
+
+def test_replay_of_speed_only_integrates_the_angle_over_log_times(tmp_path):
+    """
+    A bag with /speed (Float64) only: the angle is integrated by the trapezoid rule from 0.
+
+    On a speed ramp the trapezoid is exact: q = omega_0 t + alpha t^2 / 2. Every output
+    against Pinocchio at that angle and the ramp's alpha (measured, of each output's peak:
+    unbalance 1.4e-16; loads 1.1e-14, the summed angle's rounding over 51 rad; drive torque
+    1.4e-13, the estimated alpha).
+    """
+    import yaml
+    stamps, angle, omega = ramp(4.0, 1.5, rate=100.0, seconds=6.0)
+    bag = write_input_bag(tmp_path / 'speed.mcap', stamps, None, omega,
+                          [(stamps[0] - 1_000_000, yaml.safe_dump(LAYOUT))])
+    summary = replay(bag, tmp_path / 'out.mcap')
+    assert summary.accepted == len(stamps) and summary.rejected == 0
+    got = read_outputs(tmp_path / 'out.mcap')
+    rotor = PinocchioRotor(LAYOUT)
+    error = {}
+    for k, ns in enumerate(stamps.tolist()):
+        ref = rotor.loads(angle[k], omega[k], 1.5 if k else 0.0)
+        expected = {'/bearing_load': [*ref['force'], *ref['moment']],
+                    '/drive_torque': [0, 0, 0, 0, 0, ref['drive_torque']],
+                    '/unbalance': [*np.concatenate(rotor.unbalance(omega[k]))]}
+        expected.update({f'/supports/{name}/load': [*f, *m]
+                         for name, (f, m) in ref['supports'].items()})
+        for topic, values in expected.items():
+            peak, worst = error.get(topic, (0.0, 0.0))
+            error[topic] = (max(peak, np.abs(values).max()),
+                            max(worst, np.abs(np.subtract(got[topic][ns], values)).max()))
+    for topic, (peak, worst) in error.items():
+        assert worst <= (2e-12 if topic == '/drive_torque' else 5e-14) * peak, topic
