@@ -576,3 +576,57 @@ def test_replay_of_speed_only_integrates_the_angle_over_log_times(tmp_path):
                             max(worst, np.abs(np.subtract(got[topic][ns], values)).max()))
     for topic, (peak, worst) in error.items():
         assert worst <= (2e-12 if topic == '/drive_torque' else 5e-14) * peak, topic
+
+
+# -- CDR fields found by offset -----------------------------------------------------------
+
+@pytest.mark.parametrize('names, positions, velocities, frame', [
+    (['gantry_joint'], [0.5], [2.0], ''),
+    (['a', 'gantry_joint', 'b'], [1.0, -2.5, 3.0], [4.0, 5.5, 6.0], 'base_link'),
+    (['long_name_' * 3, 'gantry_joint'], [0.1, 0.2], [0.3, 0.4], 'x'),
+    (['gantry_joint', 'b'], [7.0, 8.0], [9.0, 10.0], 'abcdefgh'),
+])
+def test_joint_state_fields_are_found_where_rosbags_put_them(names, positions, velocities,
+                                                             frame):
+    """JointStates serialised by rosbags: stamp, position and velocity read at the offsets."""
+    import struct
+    from cvc_balance.messages.cdr import find_joint_state_fields
+    joint_type = 'sensor_msgs/msg/JointState'
+    msg = TYPESTORE.types[joint_type](
+        header=TYPESTORE.types['std_msgs/msg/Header'](
+            stamp=TYPESTORE.types['builtin_interfaces/msg/Time'](sec=-7, nanosec=123456789),
+            frame_id=frame),
+        name=names, position=np.array(positions), velocity=np.array(velocities),
+        effort=np.array([], float))
+    data = TYPESTORE.serialize_cdr(msg, joint_type).tobytes()
+    offsets, names_end = find_joint_state_fields(data, 'gantry_joint')
+    k = names.index('gantry_joint')
+    assert struct.unpack_from('<i', data, offsets['sec'])[0] == -7
+    assert struct.unpack_from('<I', data, offsets['nanosec'])[0] == 123456789
+    assert struct.unpack_from('<d', data, offsets['position'])[0] == positions[k]
+    assert struct.unpack_from('<d', data, offsets['velocity'])[0] == velocities[k]
+    # The names end where the position sequence's length starts (4-aligned after them).
+    assert struct.unpack_from('<I', data, names_end + (-(names_end - 4) % 4))[0] == len(names)
+    assert find_joint_state_fields(data, 'other_joint') is None
+    short = TYPESTORE.serialize_cdr(TYPESTORE.types[joint_type](
+        header=msg.header, name=names, position=np.array(positions),
+        velocity=np.array([], float), effort=np.array([], float)), joint_type).tobytes()
+    assert find_joint_state_fields(short, 'gantry_joint') is None     # no velocity for it
+    with pytest.raises(ValueError, match='little-endian'):
+        find_joint_state_fields(b'\x00\x00\x00\x00' + data[4:], 'gantry_joint')
+
+
+@pytest.mark.parametrize('text', ['', 'name: x', 'ä€ 😀 layout', 'a' * 1000])
+def test_string_messages_round_trip_with_rosbags(text):
+    from cvc_balance.messages.cdr import read_string_message, string_message
+    string_type = 'std_msgs/msg/String'
+    theirs = TYPESTORE.serialize_cdr(TYPESTORE.types[string_type](data=text),
+                                     string_type).tobytes()
+    assert read_string_message(theirs) == text
+    assert TYPESTORE.deserialize_cdr(string_message(text), string_type).data == text
+    with pytest.raises(ValueError, match='little-endian'):
+        read_string_message(b'\x00\x00\x00\x00' + theirs[4:])
+    with pytest.raises(ValueError, match='beyond the message'):
+        read_string_message(theirs[:-1])
+    with pytest.raises(ValueError, match='beyond the message'):
+        read_string_message(theirs[:4] + b'\x00\x00\x00\x00')
