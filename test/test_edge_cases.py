@@ -185,7 +185,7 @@ def test_alpha_defaults_to_zero_and_constant_outputs_are_kept():
 
 def test_mass_properties_add_like_pinocchio_inertias():
     """
-    MassProperties of components placed on the rotor, added, against Pinocchio's Inertia sum.
+    Mass properties of placed components add up as Pinocchio's Inertia values do.
 
     Pinocchio's value is mass, centre of mass and inertia about it; ours is about O: both
     sides compared after ours is taken about its centre of mass (measured: 7e-17 of the
@@ -588,7 +588,7 @@ def test_replay_of_speed_only_integrates_the_angle_over_log_times(tmp_path):
 ])
 def test_joint_state_fields_are_found_where_rosbags_put_them(names, positions, velocities,
                                                              frame):
-    """JointStates serialised by rosbags: stamp, position and velocity read at the offsets."""
+    """Joint states serialised by rosbags: stamp, position and velocity at the offsets."""
     import struct
     from cvc_balance.messages.cdr import find_joint_state_fields
     joint_type = 'sensor_msgs/msg/JointState'
