@@ -212,6 +212,21 @@ def test_mass_properties_add_like_pinocchio_inertias():
         assert np.abs(value.inertia - whole.inertia).max() <= 2e-15 * size
 
 
+def test_integer_motion_arrays_are_taken_as_real_numbers():
+    """
+    Speeds given as integers (encoder counts, a program's int array) are no integer math.
+
+    omega = 2^32 rad/s squared overflows int64; the loads must be those of the floats.
+    """
+    model = RotorModel.from_layout(parse_layout(random_layout(np.random.default_rng(14),
+                                                              n=3)))
+    as_ints = loads(model, np.array([0, 1, 3]), np.array([7, -2**32, 2**32]),
+                    np.array([2, 0, -1]))
+    as_floats = loads(model, [0.0, 1.0, 3.0], [7.0, -2.0**32, 2.0**32], [2.0, 0.0, -1.0])
+    np.testing.assert_array_equal(as_ints.force_rotor, as_floats.force_rotor)
+    np.testing.assert_array_equal(as_ints.moment_stator, as_floats.moment_stator)
+
+
 # -- layouts ---------------------------------------------------------------------------
 
 def two_supports(front_axial=False, rear_axial=True, masses=(60.0, 50.0)):
