@@ -645,3 +645,79 @@ def test_string_messages_round_trip_with_rosbags(text):
         read_string_message(theirs[:-1])
     with pytest.raises(ValueError, match='beyond the message'):
         read_string_message(theirs[:4] + b'\x00\x00\x00\x00')
+
+
+def test_replay_drops_samples_before_a_layout_and_keeps_the_last_good_one(tmp_path):
+    """
+    Samples before the first layout are dropped; a bad layout mid-run leaves the last good
+    one in force and is listed; the summary's peaks and top speed against Pinocchio.
+
+    A backward spin-up (omega from -2 to -14 rad/s): the top speed is max |omega|.
+    """
+    import yaml
+    from cvc_balance.bag.mcap_reader import Bag
+    from cvc_balance.bag.replay import format_summary
+    stamps, angle, omega = ramp(-2.0, -3.0, rate=100.0, seconds=4.0)
+    heavier = yaml.safe_load(yaml.safe_dump(LAYOUT))
+    heavier['components'][2]['mass'] = 9.0
+    broken = yaml.safe_load(yaml.safe_dump(LAYOUT))
+    broken['components'][1]['mass'] = -1.0
+    first, change, bad = int(stamps[50]) - 1, int(stamps[200]) - 1, int(stamps[300]) - 1
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(first, yaml.safe_dump(LAYOUT)), (change, yaml.safe_dump(heavier)),
+                           (bad, yaml.safe_dump(broken))])
+    calls = []
+    summary = replay(bag, tmp_path / 'out.mcap', progress=lambda done, total: calls.append(
+        (done, total)), compression='lz4')
+    assert (summary.samples, summary.accepted, summary.dropped, summary.rejected) == \
+        (400, 350, 50, 0)
+    assert calls[-1] == (350, 350)
+    (problem,) = summary.problems
+    assert problem.startswith('layout at ') and "component 'tube': field mass" in problem
+    assert [s.samples for s in summary.segments] == [150, 200]
+    got = read_outputs(tmp_path / 'out.mcap')
+    assert sorted(got['/bearing_load']) == stamps[50:].tolist()
+    rotors = (PinocchioRotor(LAYOUT), PinocchioRotor(heavier))
+    for segment, rotor, part in zip(summary.segments, rotors, (slice(50, 200), slice(200, 400))):
+        assert segment.max_speed == max(abs(omega[part]))
+        peaks = {}
+        for q, w in zip(angle[part], omega[part]):
+            ref = rotor.loads(q, w, -3.0)
+            peaks['total'] = max(peaks.get('total', 0.0), np.linalg.norm(ref['force']))
+            for name, (f, _) in ref['supports'].items():
+                peaks[name] = max(peaks.get(name, 0.0), np.linalg.norm(f))
+        # Measured: 4.4e-16 relative at most.
+        assert segment.peak_total == pytest.approx(peaks['total'], rel=4e-15)
+        for name, peak in segment.peak_support.items():
+            assert peak == pytest.approx(peaks[name], rel=4e-15)
+    text = format_summary(summary)
+    assert text.startswith(f'bag {bag}: 400 motion samples, 350 used, 0 rejected, 50 before '
+                           'any layout')
+    assert f"layout 'drum' ({parse_layout(heavier).digest()}) from" in text
+    assert 'top speed 13.97 rad/s' in text and 'problem: layout at' in text
+    assert {c.compression for c in Bag(tmp_path / 'out.mcap').chunks} == {'lz4'}
+
+
+def test_replay_what_if_layout_writes_that_layout(tmp_path):
+    """--layout FILE: its text goes out on /layout, as given; the bag's layouts are unused."""
+    import yaml
+    from rosbags.highlevel import AnyReader
+    stamps, angle, omega = ramp(5.0, 0.0, rate=50.0, seconds=1.0)
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(int(stamps[0]) - 1, yaml.safe_dump(LAYOUT))])
+    other = dict(LAYOUT, name='what_if', components=LAYOUT['components'][:2])
+    text = '# what if the lump fell off\n' + yaml.safe_dump(other)
+    (tmp_path / 'what_if.yaml').write_text(text)
+    summary = replay(bag, tmp_path / 'out.mcap', layout_file=tmp_path / 'what_if.yaml',
+                     compression='')
+    assert [s.layout.name for s in summary.segments] == ['what_if']
+    with AnyReader([tmp_path / 'out.mcap']) as reader:
+        layouts = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()
+                   if c.topic == '/layout']
+    assert layouts == [text]
+    rotor = PinocchioRotor(other)
+    got = read_outputs(tmp_path / 'out.mcap')
+    for k in (1, 25, 49):
+        ref = rotor.loads(angle[k], omega[k], 0.0)['force']
+        np.testing.assert_allclose(got['/bearing_load'][int(stamps[k])][:3], ref, rtol=0,
+                                   atol=1e-14 * np.abs(ref).max())
