@@ -649,8 +649,10 @@ def test_string_messages_round_trip_with_rosbags(text):
 
 def test_replay_drops_samples_before_a_layout_and_keeps_the_last_good_one(tmp_path):
     """
-    Samples before the first layout are dropped; a bad layout mid-run leaves the last good
-    one in force and is listed; the summary's peaks and top speed against Pinocchio.
+    Replay drops samples before a layout and keeps the last good one past a bad one.
+
+    A bad layout mid-run is listed among the problems; the summary's peaks and top speed
+    against Pinocchio.
 
     A backward spin-up (omega from -2 to -14 rad/s): the top speed is max |omega|.
     """
