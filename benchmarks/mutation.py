@@ -124,7 +124,7 @@ def prepare(work, module, tests):
         f'also_copy = {toml_list(["config", "bags", "docs", "resource", "pytest.ini"])}\n'
         'use_git_change_detection = false\n'
         'process_isolation = "forkserver"\n'
-        'timeout_multiplier = 20.0\n'
+        'timeout_multiplier = 8.0\n'
         'timeout_constant = 10.0\n')
     return present
 
