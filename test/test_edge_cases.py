@@ -25,7 +25,7 @@ from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.bag.replay import replay
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
 from cvc_balance.physics.assessment import assess_balance
-from cvc_balance.physics.engine import CHUNK, loads, RotorModel, sample_loads
+from cvc_balance.physics.engine import CHUNK, loads, own_tensors_of, RotorModel, sample_loads
 from cvc_balance.physics.layout import LayoutError, parse_layout
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import accepted_samples, sample_problem
@@ -137,6 +137,10 @@ def test_planar_models_put_no_moment_on_the_bearings():
             model = RotorModel.from_layout(parse_layout(layout), own_inertia=own,
                                            moments=False)
             assert (model.own_inertia, model.moments) == (own, False)
+            # Tensors handed over (as model_choice does) count only with own inertia.
+            handed = RotorModel.from_layout(parse_layout(layout), own, False,
+                                            own_tensors_of(parse_layout(layout).components))
+            assert handed.i_zz == model.i_zz and handed.p_xz == model.p_xz
             many = loads(model, q, omega, alpha)
             for k in range(len(q)):
                 single = sample_loads(model, q[k], omega[k], alpha[k])
@@ -191,7 +195,6 @@ def test_mass_properties_add_like_pinocchio_inertias():
     sides compared after ours is taken about its centre of mass (measured: 7e-17 of the
     inertia's size).
     """
-    from cvc_balance.physics.engine import own_tensors_of
     from cvc_balance.physics.inertia import place
     from reference import pinocchio_model
     mapping = random_layout(np.random.default_rng(12), n=5, every_kind=True)
