@@ -64,6 +64,8 @@ BOX = {'ixx': 1.0, 'iyy': 1.0, 'izz': 1.0, 'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}
 REFUSED = [
     # layout
     (lambda d: d.clear() or d.update(name='x'), 'layout: missing field components'),
+    (lambda d: d.pop('name'), 'layout: missing field name'),
+    (lambda d: d.pop('supports'), 'layout: missing field supports'),
     (top(name=''), "layout: field name must be a non-empty string, got ''"),
     (top(name=3), 'layout: field name must be a non-empty string, got 3'),
     (top(description=4), 'layout: field description must be a non-empty string, got 4'),
@@ -115,6 +117,7 @@ REFUSED = [
      'tangential, axial'),
     (shape(type='sphere', radius=0.1, axis='radial'),
      "component 'tube': field shape (sphere): unknown field 'axis' (known: type, radius)"),
+    (shape(type='box'), "component 'tube': field shape: missing field size"),
     (shape(type='box', size=[0.1, 0.2]), "component 'tube': field shape.size must be a list "
                                          'of 3 numbers, got [0.1, 0.2]'),
     (shape(type='box', size=[0.1, 0.0, 0.2]), "component 'tube': field shape.size[1] must be "
@@ -145,6 +148,7 @@ REFUSED = [
     (lambda d: d['supports'].__setitem__(0, 'front'), 'support #1: expected a mapping of '
                                                       'fields, got str'),
     (drop(0, 'name', 'supports'), 'support #1: missing field name'),
+    (support(1, name=5), 'support #2: field name must be a non-empty string, got 5'),
     (drop(1, 'z', 'supports'), "support 'rear': missing field z"),
     (support(1, z='far'), "support 'rear': field z must be a number, got str 'far'"),
     (support(1, stiffness=1e9), "support 'rear': unknown field 'stiffness' (known: name, z, "
@@ -208,7 +212,9 @@ def test_what_is_accepted_at_the_edges():
                                  'inertia': {'ixx': 2e-5, 'iyy': 3e-5, 'izz': 5e-5,
                                              'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}})
     layout['supports'] = [{'name': 'slewing', 'z': 0.0, 'axial': False}]
+    layout['description'] = 'a gantry with a screw, a disc, a rod and a chip'
     parsed = parse_layout(layout)
+    assert parsed.description == layout['description']
     assert [c.name for c in parsed.components] == ['tube', 'detector', 'screw', 'disc', 'rod',
                                                    'chip']
     assert parsed.components[1].angle == pytest.approx(-4 * math.pi, rel=1e-15)
