@@ -726,3 +726,105 @@ def test_replay_what_if_layout_writes_that_layout(tmp_path):
         ref = rotor.loads(angle[k], omega[k], 0.0)['force']
         np.testing.assert_allclose(got['/bearing_load'][int(stamps[k])][:3], ref, rtol=0,
                                    atol=1e-14 * np.abs(ref).max())
+
+
+# -- the unbalance's wrench, correction angles, a rotor on one support -------------------
+
+def test_unbalance_wrench_is_pinocchios_and_correction_angles_stay_in_range():
+    """
+    The unbalance topic's wrench against Pinocchio's mass properties (measured 3e-16 of
+    its size); correction masses opposite each plane's unbalance, angles in (-pi, pi].
+    """
+    from cvc_balance.physics.unbalance import (couple_unbalance, plane_unbalances,
+                                               static_unbalance, unbalance_wrench)
+    mapping = random_layout(np.random.default_rng(15), n=6, every_kind=True)
+    model = RotorModel.from_layout(parse_layout(mapping))
+    rotor = PinocchioRotor(mapping)
+    for omega in (0.0, 3.0, -17.5):
+        force, torque = unbalance_wrench(static_unbalance(model), couple_unbalance(model),
+                                         omega)
+        ref_force, ref_torque = rotor.unbalance(omega)
+        size = max(np.abs(ref_force).max(), np.abs(ref_torque).max(), 1e-300)
+        assert np.abs(np.subtract(force, ref_force)).max() <= 4e-15 * size
+        assert np.abs(np.subtract(torque, ref_torque)).max() <= 4e-15 * size
+        assert force[2] == 0.0 and torque[2] == 0.0
+    # Planes whose unbalance points at 0, at +-pi/2, just either side of 0 and at pi.
+    for theta in (0.0, 0.5, 1.5, math.pi / 2, -0.5, -math.pi / 2, -3.0, 3.0, math.pi):
+        layout = parse_layout({'name': 'one', 'components': [
+            {'name': 'm', 'mass': 2.0, 'radius': 0.3, 'angle': theta}],
+            'supports': [{'name': 'a', 'z': -0.2}, {'name': 'b', 'z': 0.2, 'axial': True}]})
+        for plane in plane_unbalances(RotorModel.from_layout(layout), -0.2, 0.2, 0.5):
+            assert -math.pi < plane.correction_angle <= math.pi
+            turn = math.remainder(plane.correction_angle - plane.angle, 2 * math.pi)
+            assert abs(abs(turn) - math.pi) < 1e-15
+            if plane.angle == 0.0:
+                assert plane.correction_angle == math.pi
+
+
+def test_a_rotor_on_one_support_is_judged_by_its_static_unbalance():
+    """
+    No correction planes (one support, none given): G = U omega / m, by hand.
+
+    U_per = G m / omega; a speed of 0 cannot be judged (one clear message).
+    """
+    layout = parse_layout({'name': 'turntable', 'components': [
+        {'name': 'plate', 'mass': 80.0, 'radius': 0.0, 'angle': 0.0},
+        {'name': 'lump', 'mass': 0.2, 'radius': 0.5, 'angle': 1.0}],
+        'supports': [{'name': 'slewing', 'z': 0.0}], 'balancing': {'grade': 2.5}})
+    model = RotorModel.from_layout(layout)
+    omega = 0.5                      # below 1 rad/s too: any speed > 0 can be judged
+    assessment = assess_balance(model, omega)
+    expected = 0.2 * 0.5 * omega / 80.2 * 1e3        # mm/s
+    assert assessment.planes == () and assessment.plane_permissible == ()
+    assert assessment.equivalent_grade == pytest.approx(expected, rel=1e-15)
+    assert assessment.finest_grade_met == 1.0 and assessment.within_grade     # G 0.62
+    assert assessment.permissible == pytest.approx(2.5e-3 * 80.2 / omega, rel=1e-15)
+    with pytest.raises(ValueError) as error:
+        assess_balance(model, 0.0)
+    assert str(error.value) == 'a service speed > 0 rad/s is needed to judge the balance grade'
+    planes = assess_balance(RotorModel.from_layout(parse_layout(two_supports())), 20.0)
+    share = (0.25 - 0.05 * 60.0 / 110.0) / 0.5      # centre of mass at z = 0.05 * 60 / 110
+    assert planes.plane_permissible == pytest.approx(
+        (planes.permissible * share, planes.permissible * (1 - share)), rel=1e-15)
+
+
+# -- the vectorised alpha against weighted least squares --------------------------------
+
+def weighted_slope(time, omega, k, tau):
+    """Slope of the least-squares line through samples 0..k, weights exp(-age / tau)."""
+    age = time[k] - time[:k + 1]
+    weight = np.exp(-age / tau)
+    return np.polyfit(time[:k + 1] - time[k], omega[:k + 1], 1, w=np.sqrt(weight))[0]
+
+
+@pytest.mark.parametrize('block', [None, 0.013, 0.5, 100.0])
+def test_vectorised_alpha_is_the_weighted_least_squares_slope(block):
+    """
+    Noisy, irregular samples whose alpha changes (a sine and steps): every 7th sample's
+    alpha against numpy's weighted polyfit over all earlier samples, whatever the block
+    length, and the live estimator's: measured 1.8e-13 and 2.4e-13 of alpha's spread
+    (with one block over the whole run; 1.5e-13 and 8.9e-14 with shorter ones).
+    """
+    from cvc_balance.physics.motion import acceleration_series, AccelerationEstimator
+    rng = np.random.default_rng(16)
+    time = 3.0 + np.cumsum(rng.uniform(2e-4, 4e-3, 600))
+    omega = 20.0 + 3.0 * np.sin(4.0 * time) + 2.0 * (time > 3.7) + rng.normal(0, 0.01, 600)
+    tau = 0.05
+    alpha = acceleration_series(time, omega, tau, block)
+    assert alpha[0] == 0.0
+    spread = 12.0 * 4.0
+    for k in range(1, 600, 7):
+        assert abs(alpha[k] - weighted_slope(time, omega, k, tau)) <= 1e-12 * spread
+    live = AccelerationEstimator(tau)
+    for k, (t, w) in enumerate(zip(time.tolist(), omega.tolist())):
+        assert abs(live.update(t, w) - alpha[k]) <= 1e-12 * spread
+    assert acceleration_series(np.zeros(0), np.zeros(0), tau).shape == (0,)
+    assert acceleration_series(np.array([1.0]), np.array([5.0]), tau).tolist() == [0.0]
+
+
+def test_a_time_constant_must_be_positive():
+    from cvc_balance.physics.motion import AccelerationEstimator
+    for tau in (0.0, -0.1):
+        with pytest.raises(ValueError) as error:
+            AccelerationEstimator(tau)
+        assert str(error.value) == f'time constant must be > 0 s, got {tau}'
