@@ -732,8 +732,10 @@ def test_replay_what_if_layout_writes_that_layout(tmp_path):
 
 def test_unbalance_wrench_is_pinocchios_and_correction_angles_stay_in_range():
     """
-    The unbalance topic's wrench against Pinocchio's mass properties (measured 3e-16 of
-    its size); correction masses opposite each plane's unbalance, angles in (-pi, pi].
+    The unbalance wrench is Pinocchio's; correction angles stay in (-pi, pi].
+
+    The wrench against Pinocchio's mass properties (measured 2.9e-16 of its size);
+    correction masses opposite each plane's unbalance.
     """
     from cvc_balance.physics.unbalance import (couple_unbalance, plane_unbalances,
                                                static_unbalance, unbalance_wrench)
@@ -800,6 +802,8 @@ def weighted_slope(time, omega, k, tau):
 @pytest.mark.parametrize('block', [None, 0.013, 0.5, 100.0])
 def test_vectorised_alpha_is_the_weighted_least_squares_slope(block):
     """
+    The vectorised alpha is the weighted least-squares slope.
+
     Noisy, irregular samples whose alpha changes (a sine and steps): every 7th sample's
     alpha against numpy's weighted polyfit over all earlier samples, whatever the block
     length, and the live estimator's: measured 1.8e-13 and 2.4e-13 of alpha's spread
