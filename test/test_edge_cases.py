@@ -832,3 +832,84 @@ def test_a_time_constant_must_be_positive():
         with pytest.raises(ValueError) as error:
             AccelerationEstimator(tau)
         assert str(error.value) == f'time constant must be > 0 s, got {tau}'
+
+
+# -- the model choice's worst cases, by hand ---------------------------------------------
+
+def choice_scene(supports):
+    """Components with S_x, S_y, S_z, both P and an own xz, yz product all non-zero."""
+    return parse_layout({'name': 'scene', 'gravity': [0.7, -9.0, 2.5], 'components': [
+        {'name': 'a', 'mass': 30.0, 'radius': 0.5, 'angle': 0.4, 'z': 0.2,
+         'shape': {'type': 'box', 'size': [0.2, 0.3, 0.1]}},
+        {'name': 'b', 'mass': 20.0, 'radius': 0.6, 'angle': 2.5, 'z': -0.1},
+        {'name': 'c', 'mass': 10.0, 'radius': 0.3, 'angle': -1.2, 'z': 0.05,
+         'inertia': {'ixx': 0.3, 'iyy': 0.4, 'izz': 0.5, 'ixy': 0.01, 'ixz': 0.03,
+                     'iyz': -0.04}}], 'supports': supports})
+
+
+TWO = [{'name': 'front', 'z': -0.3}, {'name': 'rear', 'z': 0.5, 'axial': True}]
+ONE = [{'name': 'slewing', 'z': 0.1}]
+
+
+@pytest.mark.parametrize('supports', [TWO, ONE], ids=['two supports', 'one support'])
+def test_model_choice_worst_cases_by_hand(supports):
+    """
+    Each model's stated deviation against the bounds of the README's table, by hand.
+
+    Planar: |S_xy| |g_z| + |S_z| |g_xy| + (alpha + omega^2) (|P| + sum |(I_xz, I_yz)|);
+    point masses: (alpha + omega^2) sum |(I_xz, I_yz)| and alpha sum I_zz,own; a support
+    force by |dM| / span with two supports, none with one. The bounds carry a rounding
+    margin of (n + 2) eps of the terms: measured 1.7e-15 relative here.
+    """
+    from cvc_balance.physics.model_choice import choose_model, Envelope, MODELS
+    layout = choice_scene(supports)
+    envelope = Envelope(12.0, 3.0)
+    dynamic = 3.0 + 144.0
+    s_x = 30 * 0.5 * math.cos(0.4) + 20 * 0.6 * math.cos(2.5) + 10 * 0.3 * math.cos(-1.2)
+    s_y = 30 * 0.5 * math.sin(0.4) + 20 * 0.6 * math.sin(2.5) + 10 * 0.3 * math.sin(-1.2)
+    s_z = 30 * 0.2 - 20 * 0.1 + 10 * 0.05
+    p_x = (30 * 0.5 * 0.2 * math.cos(0.4) - 20 * 0.6 * 0.1 * math.cos(2.5)
+           + 10 * 0.3 * 0.05 * math.cos(-1.2))
+    p_y = (30 * 0.5 * 0.2 * math.sin(0.4) - 20 * 0.6 * 0.1 * math.sin(2.5)
+           + 10 * 0.3 * 0.05 * math.sin(-1.2))
+    own_products = math.hypot(0.03, -0.04)           # the box has none
+    own_zz = 30 * (0.2**2 + 0.3**2) / 12 + 0.5
+    planar = (math.hypot(s_x, s_y) * 2.5 + abs(s_z) * math.hypot(0.7, -9.0)
+              + dynamic * (math.hypot(p_x, p_y) + own_products))
+    expected = {'point masses, planar': (planar, 3.0 * own_zz),
+                'rigid bodies, planar': (planar, 0.0),
+                'point masses': (dynamic * own_products, 3.0 * own_zz),
+                'rigid bodies': (0.0, 0.0)}
+    span = 0.8
+    for k, (name, _, _) in enumerate(MODELS):
+        # The tolerance exactly at this model's stated deviation: this one is taken.
+        probe = choose_model(layout, Tolerance(0.0, 0.0, 0.0), envelope)
+        assert probe.name == 'rigid bodies'
+        moment, torque = expected[name]
+        force = moment / span if len(supports) == 2 else 0.0
+        tolerance = Tolerance(force * (1 + 1e-14) + 1e-300, moment * (1 + 1e-14) + 1e-300,
+                              torque * (1 + 1e-14) + 1e-300)
+        choice = choose_model(layout, tolerance, envelope)
+        assert choice.name == name or MODELS.index(
+            next(m for m in MODELS if m[0] == choice.name)) < k
+        if choice.name != name:
+            continue
+        deviation = choice.deviation
+        assert deviation.moment == pytest.approx(moment, rel=4e-15, abs=1e-300)
+        assert deviation.torque == pytest.approx(torque, rel=4e-15, abs=1e-300)
+        assert deviation.force == pytest.approx(force, rel=4e-15, abs=1e-300)
+        exact = choose_model(layout, Tolerance(deviation.force, deviation.moment,
+                                               deviation.torque), envelope)
+        assert exact.name == name                       # within means <=
+        assert (choice.model.own_inertia, choice.model.moments) == \
+            next((own, moments) for n, own, moments in MODELS if n == name)
+    # Under another gravity (the scene's, not the layout's): no tilt, no axial gravity.
+    level = choose_model(layout, Tolerance(math.inf, planar, math.inf), envelope,
+                         gravity=(0.0, -9.80665, 0.0))
+    assert level.deviation.moment == pytest.approx(
+        abs(s_z) * 9.80665 + dynamic * (math.hypot(p_x, p_y) + own_products), rel=4e-15)
+    # Nothing within a tolerance no model meets: the full model, said as such.
+    stubborn = choose_model(layout, Tolerance(-1.0, -1.0, -1.0), envelope)
+    assert stubborn.name == 'rigid bodies'
+    assert (stubborn.deviation.force, stubborn.deviation.moment,
+            stubborn.deviation.torque) == (0.0, 0.0, 0.0)
