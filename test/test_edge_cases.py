@@ -913,3 +913,51 @@ def test_model_choice_worst_cases_by_hand(supports):
     assert stubborn.name == 'rigid bodies'
     assert (stubborn.deviation.force, stubborn.deviation.moment,
             stubborn.deviation.torque) == (0.0, 0.0, 0.0)
+
+
+# -- shape inertias and integer input -----------------------------------------------------
+
+@pytest.mark.parametrize('axis', [None, 'axial', 'radial', 'tangential'])
+def test_shape_inertias_are_pinocchios(axis):
+    """
+    Cylinders and tubes along each axis (and by default, axial), boxes, spheres: the
+    tensors against Pinocchio's FromCylinder, FromBox, FromSphere, turned onto the axis
+    (a tube: a full cylinder minus its bore). Measured: equal to 1 ulp of the largest.
+    """
+    import pinocchio as pin
+    from cvc_balance.physics import inertia as shapes
+    from reference import AXIS_ROTATION
+    turn = AXIS_ROTATION['axial' if axis is None else axis]
+    given = {} if axis is None else {'axis': axis}
+    m, r, ri, length = 7.0, 0.12, 0.05, 0.4
+    cylinder = pin.SE3(turn, np.zeros(3)).act(pin.Inertia.FromCylinder(m, r, length)).inertia
+    density = m / (r * r - ri * ri)
+    tube = pin.SE3(turn, np.zeros(3)).act(
+        pin.Inertia.FromCylinder(density * r * r, r, length)
+        - pin.Inertia.FromCylinder(density * ri * ri, ri, length)).inertia
+    from cvc_balance.physics.frames import tensor_from_elements
+    for ours, theirs in (
+            (shapes.solid_cylinder(m, r, length, **given), cylinder),
+            (tensor_from_elements(*shapes.solid_cylinder_elements(m, r, length, **given)),
+             cylinder),
+            (shapes.tube(m, ri, r, length, **given), tube),
+            (tensor_from_elements(*shapes.tube_elements(m, ri, r, length, **given)), tube),
+            (tensor_from_elements(*shapes.box_elements(m, (0.1, 0.2, 0.3))),
+             pin.Inertia.FromBox(m, 0.1, 0.2, 0.3).inertia),
+            (tensor_from_elements(*shapes.sphere_elements(m, r)),
+             pin.Inertia.FromSphere(m, r).inertia)):
+        np.testing.assert_allclose(ours, theirs, rtol=0, atol=4e-16 * np.abs(theirs).max())
+
+
+def test_integer_tensors_and_placements_are_taken_as_real_numbers():
+    """An integer tensor, mass or place (a program's ints) gives what the floats give."""
+    from cvc_balance.physics.inertia import parallel_axis_cvc, place
+    as_ints = parallel_axis_cvc(np.eye(3, dtype=int), 3, 2, 1, 1)
+    as_floats = parallel_axis_cvc(np.eye(3), 3.0, 2.0, 1.0, 1.0)
+    np.testing.assert_array_equal(as_ints, as_floats)
+    own = np.array([np.eye(3, dtype=int)] * 2)
+    ints = place([3, 5], own, [1, 2], [0, 3], [1, -1])
+    floats = place([3.0, 5.0], own.astype(float), [1.0, 2.0], [0.0, 3.0], [1.0, -1.0])
+    assert ints.mass == floats.mass
+    np.testing.assert_array_equal(ints.first_moment, floats.first_moment)
+    np.testing.assert_array_equal(ints.inertia, floats.inertia)
