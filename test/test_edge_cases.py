@@ -920,6 +920,8 @@ def test_model_choice_worst_cases_by_hand(supports):
 @pytest.mark.parametrize('axis', [None, 'axial', 'radial', 'tangential'])
 def test_shape_inertias_are_pinocchios(axis):
     """
+    Shape inertias are Pinocchio's.
+
     Cylinders and tubes along each axis (and by default, axial), boxes, spheres: the
     tensors against Pinocchio's FromCylinder, FromBox, FromSphere, turned onto the axis
     (a tube: a full cylinder minus its bore). Measured: equal to 1 ulp of the largest.
