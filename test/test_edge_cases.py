@@ -952,12 +952,19 @@ def test_shape_inertias_are_pinocchios(axis):
 
 
 def test_integer_tensors_and_placements_are_taken_as_real_numbers():
-    """An integer tensor, mass or place (a program's ints) gives what the floats give."""
+    """An integer tensor, mass, place or angle (a program's ints) gives what floats give."""
     from cvc_balance.physics.inertia import parallel_axis_cvc, place
     as_ints = parallel_axis_cvc(np.eye(3, dtype=int), 3, 2, 1, 1)
     as_floats = parallel_axis_cvc(np.eye(3), 3.0, 2.0, 1.0, 1.0)
     np.testing.assert_array_equal(as_ints, as_floats)
     own = np.array([np.eye(3, dtype=int)] * 2)
+    from cvc_balance.physics import compensated
+    (c_int, s_int), (c_float, s_float) = (compensated.cos_sin(np.array([1, 2, 30])),
+                                          compensated.cos_sin(np.array([1.0, 2.0, 30.0])))
+    for a, b in ((c_int, c_float), (s_int, s_float)):
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+    assert compensated.total((np.zeros(0), np.zeros(0))) == 0.0     # a sum of nothing
     ints = place([3, 5], own, [1, 2], [0, 3], [1, -1])
     floats = place([3.0, 5.0], own.astype(float), [1.0, 2.0], [0.0, 3.0], [1.0, -1.0])
     assert ints.mass == floats.mass
