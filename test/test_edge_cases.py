@@ -970,3 +970,78 @@ def test_integer_tensors_and_placements_are_taken_as_real_numbers():
     assert ints.mass == floats.mass
     np.testing.assert_array_equal(ints.first_moment, floats.first_moment)
     np.testing.assert_array_equal(ints.inertia, floats.inertia)
+
+
+def test_replay_summary_over_many_blocks_in_full(tmp_path):
+    """
+    A coast-down of 40000 samples (three of replay's 16384-sample blocks), after two
+    layouts that no sample used: counts, peaks (largest in the first block) and top speed
+    against Pinocchio, the output's latched /layout, and the summary's text in full.
+
+    The plane unbalance and the grade are by hand (ISO 21940-2 per component; G = U_plane
+    omega / (share m)); peaks are Pinocchio's over every sample.
+    """
+    import yaml
+    from mcap.reader import make_reader as reader_of
+    from cvc_balance.bag.replay import format_summary
+    stamps, angle, omega = ramp(30.0, -0.5, rate=1000.0, seconds=40.0)
+    early = yaml.safe_load(yaml.safe_dump(LAYOUT))
+    early['name'] = 'early'
+    layout = dict(LAYOUT, balancing={'planes': [-0.2, 0.2], 'grade': 2.5,
+                                     'service_speed': 30.0})
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(int(stamps[0]) - 3, yaml.safe_dump(early)),
+                           (int(stamps[0]) - 2, yaml.safe_dump(layout))])
+    summary = replay(bag, tmp_path / 'out.mcap')
+    assert [s.samples for s in summary.segments] == [0, 40000]
+    assert summary.segments[0].peak_support == {}
+    assert summary.segments[0].peak_total == 0.0 and summary.segments[0].max_speed == 0.0
+    segment = summary.segments[1]
+    rotor = PinocchioRotor(layout)
+    peaks = {'total': 0.0, 'front': 0.0, 'rear': 0.0}
+    for q, w in zip(angle[1:], omega[1:]):
+        ref = rotor.loads(q, w, -0.5)
+        peaks['total'] = max(peaks['total'], np.linalg.norm(ref['force']))
+        for name, (f, _) in ref['supports'].items():
+            peaks[name] = max(peaks[name], np.linalg.norm(f))
+    assert segment.peak_total == pytest.approx(peaks['total'], rel=4e-15)
+    for name in ('front', 'rear'):
+        assert segment.peak_support[name] == pytest.approx(peaks[name], rel=4e-15)
+    assert segment.max_speed == 30.0
+    with open(tmp_path / 'out.mcap', 'rb') as stream:
+        channels = reader_of(stream).get_summary().channels.values()
+    (layout_channel,) = [c for c in channels if c.topic == '/layout']
+    assert yaml_qos(layout_channel.metadata['offered_qos_profiles']) == (1, 1)
+    # The summary as people read it, every figure computed here.
+    u = {}
+    for c in layout['components']:
+        theta = c['angle'] if 'angle' in c else math.radians(c['angle_deg'])
+        u[c['name']] = (c['mass'] * c['radius'] * complex(math.cos(theta), math.sin(theta)),
+                        c.get('z', 0.0))
+    plane_1 = sum(v * (0.2 - z) / 0.4 for v, z in u.values())
+    plane_2 = sum(v * (z + 0.2) / 0.4 for v, z in u.values())
+    mass = sum(c['mass'] for c in layout['components'])
+    z_com = sum(c['mass'] * c.get('z', 0.0) for c in layout['components']) / mass
+    shares = [min(max(s, 0.3), 0.7) for s in ((0.2 - z_com) / 0.4, (z_com + 0.2) / 0.4)]
+    grade = max(abs(p) / s for p, s in zip((plane_1, plane_2), shares)) * 30.0 / mass * 1e3
+    digest = parse_layout(layout).digest()
+    summary.seconds = 0.25
+    expected = '\n'.join([
+        f'bag {bag}: 40000 motion samples, 40000 used, 0 rejected, 0 before any layout',
+        f"layout 'early' ({parse_layout(early).digest()}) from 5.000 s: 0 samples, "
+        'top speed 0 rad/s',
+        '  peak load on the stator 0.0 N; per support: ',
+        f"layout 'drum' ({digest}) from 5.000 s: 40000 samples, top speed 30 rad/s",
+        f"  peak load on the stator {peaks['total']:.1f} N; per support: front "
+        f"{peaks['front']:.1f} N, rear {peaks['rear']:.1f} N",
+        f'  unbalance: plane I (z -0.200 m) {abs(plane_1) * 1e6:.1f} g mm at '
+        f'{math.degrees(np.angle(plane_1)):.1f} deg; plane II (z 0.200 m) '
+        f'{abs(plane_2) * 1e6:.1f} g mm at {math.degrees(np.angle(plane_2)):.1f} deg; '
+        f'achieved G {grade:.3g} at 30 rad/s -> {"WITHIN" if grade <= 2.5 else "OUT OF"} '
+        'G 2.5',
+        '40000 samples in 0.250 s (0.160 M samples/s, read + compute + write); wrote '
+        f'{tmp_path / "out.mcap"}'])
+    assert format_summary(summary) == expected
+    summary.seconds, summary.output = 0.0, ''
+    assert format_summary(summary).splitlines()[-1] == \
+        '40000 samples in 0.000 s (0.000 M samples/s, read + compute)'
