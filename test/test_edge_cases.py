@@ -974,6 +974,8 @@ def test_integer_tensors_and_placements_are_taken_as_real_numbers():
 
 def test_replay_summary_over_many_blocks_in_full(tmp_path):
     """
+    Replay's summary over several blocks, in full.
+
     A coast-down of 40000 samples (three of replay's 16384-sample blocks), after two
     layouts that no sample used: counts, peaks (largest in the first block) and top speed
     against Pinocchio, the output's latched /layout, and the summary's text in full.
