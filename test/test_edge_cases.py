@@ -13,6 +13,7 @@ Edges no test reached before a mutation run showed them (issue 18), against refe
 """
 
 import math
+import os
 
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
@@ -720,6 +721,9 @@ def test_replay_what_if_layout_writes_that_layout(tmp_path):
         layouts = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()
                    if c.topic == '/layout']
     assert layouts == [text]
+    with open(tmp_path / 'out.mcap', 'rb') as stream:     # given before the run: at time 0
+        assert [m.log_time for _, c, m in make_reader(stream).iter_messages()
+                if c.topic == '/layout'] == [0]
     rotor = PinocchioRotor(other)
     got = read_outputs(tmp_path / 'out.mcap')
     for k in (1, 25, 49):
@@ -1047,3 +1051,67 @@ def test_replay_summary_over_many_blocks_in_full(tmp_path):
     summary.seconds, summary.output = 0.0, ''
     assert format_summary(summary).splitlines()[-1] == \
         '40000 samples in 0.000 s (0.000 M samples/s, read + compute)'
+
+
+def test_replay_accounts_for_every_input_and_says_why(tmp_path, monkeypatch):
+    """
+    What replay reads, refuses and says, in its own words.
+
+    Joint states without the rotor's joint count among the samples as rejected; a speed
+    of 1000.5 rad/s is beyond the default max_speed; a sample logged at the very time of
+    the first layout uses it; a layout that is not YAML is refused with its reason; with
+    no output, no file is written; a tolerance run copes with a layout no sample used and
+    with speeds and accelerations under 1.
+    """
+    import yaml
+    from cvc_balance.bag.mcap_reader import BagError
+    monkeypatch.chdir(tmp_path)
+    stamps, angle, omega = ramp(0.2, 0.3, rate=50.0, seconds=2.0)
+    omega[30] = 1000.5
+    first = int(stamps[0])
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(first - 2, yaml.safe_dump(dict(LAYOUT, name='unused'))),
+                           (first, yaml.safe_dump(LAYOUT)),
+                           (int(stamps[60]) - 1, 'name: [unclosed')])
+    write_input_bag(tmp_path / 'other.mcap', stamps[:3] + 10**9, angle[:3], omega[:3],
+                    names=('some_other_joint',))
+    summary = replay(bag, tolerance=Tolerance(math.inf, math.inf, 1e9))
+    assert sorted(os.listdir(tmp_path)) == ['in.mcap', 'other.mcap']    # nothing written
+    assert (summary.samples, summary.accepted, summary.rejected, summary.dropped) == \
+        (100, 99, 1, 0)
+    assert summary.reasons == ['motion samples not finite, beyond max_speed or not after '
+                               'the previous stamp']
+    (problem,) = summary.problems
+    assert problem == (f'layout at {(int(stamps[60]) - 1) * 1e-9:.3f} s rejected (previous '
+                       'stays in force): layout message: line 1: not valid YAML or JSON: '
+                       + problem.split('not valid YAML or JSON: ')[1])
+    unused, used = summary.segments
+    assert unused.samples == 0 and (unused.choice.envelope.omega_max,
+                                    unused.choice.envelope.alpha_max) == (0.0, 0.0)
+    assert used.samples == 99
+    assert used.choice.envelope.omega_max == pytest.approx(0.2 + 0.3 * 99 / 50, rel=1e-15)
+    assert used.choice.envelope.alpha_max == pytest.approx(0.3, rel=1e-9)
+    with pytest.raises(BagError) as error:
+        replay(tmp_path / 'other.mcap')
+    assert str(error.value) == (f'{tmp_path / "other.mcap"}: no usable layout in the bag '
+                                '(topic layout, std_msgs/msg/String); give one with --layout')
+    (tmp_path / 'layout.yaml').write_text(yaml.safe_dump(LAYOUT))
+    foreign = replay(tmp_path / 'other.mcap', layout_file=tmp_path / 'layout.yaml')
+    assert (foreign.samples, foreign.accepted, foreign.rejected) == (3, 0, 3)
+    assert foreign.reasons[0] == "joint_states without joint 'gantry_joint' or its position " \
+        'and velocity'
+    at_once = write_input_bag(tmp_path / 'at_once.mcap', stamps[:5], angle[:5], omega[:5],
+                              [(first, yaml.safe_dump(LAYOUT))])
+    assert replay(at_once).dropped == 0          # logged at the layout's time: it applies
+    layout_only = tmp_path / 'layout_only.mcap'
+    with BagWriter(layout_only) as writer:
+        writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
+    with pytest.raises(BagError) as error:
+        replay(layout_only)
+    assert str(error.value).endswith('no joint_states (sensor_msgs/msg/JointState) or speed '
+                                     '(std_msgs/msg/Float64) topic; the bag has: /layout '
+                                     '(std_msgs/msg/String)')
+    with BagWriter(tmp_path / 'empty.mcap'):
+        pass
+    with pytest.raises(BagError, match='topic; the bag has: none$'):
+        replay(tmp_path / 'empty.mcap')
