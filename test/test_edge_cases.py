@@ -1134,3 +1134,21 @@ def test_vectorised_alpha_over_a_long_run_stays_finite():
     expected = np.array([live.update(t, w) for t, w in zip(time.tolist(), omega.tolist())])
     assert np.all(np.isfinite(alpha))
     assert np.abs(alpha - expected).max() <= 4e-12 * np.abs(expected).max()
+
+
+def test_model_choice_without_gravity():
+    """
+    Without gravity, a rotor in one plane needs no moment terms.
+
+    A balancing machine: the planar point-mass model is exact for the forces and moments;
+    its torque deviation is alpha sum I_zz,own.
+    """
+    from cvc_balance.physics.model_choice import choose_model, Envelope
+    layout = parse_layout(dict(two_supports(), gravity=[0.0, 0.0, 0.0], components=[
+        {'name': 'a', 'mass': 5.0, 'radius': 0.4, 'angle': 0.2,
+         'shape': {'type': 'box', 'size': [0.1, 0.1, 0.1]}},
+        {'name': 'b', 'mass': 3.0, 'radius': 0.5, 'angle': 2.0}]))
+    choice = choose_model(layout, Tolerance(1e-6, 1e-6, math.inf), Envelope(20.0, 2.0))
+    assert choice.name == 'point masses, planar'
+    assert (choice.deviation.force, choice.deviation.moment) == (0.0, 0.0)
+    assert choice.deviation.torque == pytest.approx(2.0 * 5.0 * 0.02 / 12, rel=1e-15)
