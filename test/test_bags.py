@@ -134,7 +134,10 @@ def test_offline_replay_matches_the_engine_sample_by_sample(scenario_file, tmp_p
         values = np.array([wrench(m) for _, m in got[topic]])
         reference = np.array([expected[stamp_ns(m)][topic] for _, m in got[topic]])
         scale = np.abs(reference).max()
-        assert np.abs(values - reference).max() <= 1e-9 * scale, topic
+        # Measured, of each topic's peak: loads 5.1e-16 at most, unbalance 0, drive torque
+        # 2.6e-13 (alpha from two implementations of the estimator).
+        bound = 2e-12 if topic == '/drive_torque' else 4e-15
+        assert np.abs(values - reference).max() <= bound * scale, topic
         frame = 'rotor' if topic in ('/unbalance', '/drive_torque') else 'stator'
         assert {m.header.frame_id for _, m in got[topic]} == {frame}
     assert len(got['/bearing_load']) == len(stamps)

@@ -3,7 +3,9 @@ Bundled bags played live through the node give the offline replay's outputs, sam
 
 The node runs as its own process; ``cvc-balance play`` publishes the bag's layouts and
 joint states with their timing and records the node's outputs. Both bags are compared with
-``cvc-balance replay`` of the same bag to 1e-9 of each output's peak over the run.
+``cvc-balance replay`` of the same bag, to 4e-15 of each output's peak over the run
+(measured 5.1e-16; unbalance: equal), 2e-12 for the drive torque (2.7e-13: its alpha goes
+through two implementations of the estimator).
 """
 
 from pathlib import Path
@@ -66,7 +68,8 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
         assert np.array_equal(np.sort(live_stamps), stamps), topic    # every sample, once
         order = np.argsort(live_stamps)
         scale = np.abs(values).max()
-        assert np.abs(live_values[order] - values).max() <= 1e-9 * scale, topic
+        bound = 2e-12 if topic == '/drive_torque' else 4e-15
+        assert np.abs(live_values[order] - values).max() <= bound * scale, topic
     if record:
         recorded = Bag(tmp_path / 'node.mcap')
         assert not recorded.problems       # the node finalised its recording on SIGINT

@@ -1,12 +1,11 @@
 """
 No more model than a scene needs.
 
-Which model is taken, that it stays within the stated tolerance against the 40-digit
-reference, and that it costs no more than the full one.
+Which model is taken and that it stays within the stated tolerance against the 40-digit
+reference. What a reduced model saves is measured by benchmarks/model_choice_cost.py.
 """
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -92,7 +91,8 @@ def test_chosen_model_stays_within_the_tolerance(seed):
     got = loads(choice.model, q, omega, alpha)
     full = loads(RotorModel.from_layout(layout), q, omega, alpha)
     deviation = choice.deviation
-    rounding = 1e-9 * (1.0 + np.abs(force).max() + np.abs(moment).max())
+    # Float64 rounding against the reference: measured 1.9e-16 of this size at most.
+    rounding = 2e-15 * (1.0 + np.abs(force).max() + np.abs(moment).max())
     assert np.abs(got.force_rotor - force).max() <= rounding
     assert np.linalg.norm(got.moment_rotor - moment, axis=1).max() <= \
         deviation.moment + rounding
@@ -105,38 +105,6 @@ def test_chosen_model_stays_within_the_tolerance(seed):
     if choice.name != 'rigid bodies':
         assert (deviation.force <= tolerance.force and deviation.moment <= tolerance.moment
                 and deviation.torque <= tolerance.torque)
-
-
-def best_time(call, repeat=7):
-    best = math.inf
-    for _ in range(repeat):
-        start = time.perf_counter()
-        call()
-        best = min(best, time.perf_counter() - start)
-    return best
-
-
-def test_a_reduced_model_costs_no_more_than_the_full_one():
-    """
-    Per sample (moment terms skipped) and once (own tensors not turned and summed).
-
-    Best of several timings; 5 % is left for timing noise on a shared machine.
-    """
-    layout = gantry()
-    choice = choose_model(layout, Tolerance(1.0, 1.0), ENVELOPE)
-    assert choice.name == 'point masses, planar'
-    full = RotorModel.from_layout(layout)
-    rng = np.random.default_rng(3)
-    q, omega, alpha = (rng.uniform(0, 6, 1 << 18), rng.uniform(0, 25, 1 << 18),
-                       rng.uniform(-4, 4, 1 << 18))
-    per_sample_reduced = best_time(lambda: loads(choice.model, q, omega, alpha), 9)
-    per_sample_full = best_time(lambda: loads(full, q, omega, alpha), 9)
-    assert per_sample_reduced <= 1.05 * per_sample_full
-    big = parse_layout(random_layout(np.random.default_rng(4), n=20000, supports=2,
-                                     tilt=False))
-    chosen_once = best_time(lambda: choose_model(big, Tolerance(1e9, 1e9), ENVELOPE), 5)
-    full_once = best_time(lambda: RotorModel.from_layout(big), 5)
-    assert chosen_once <= 1.05 * full_once
 
 
 def test_the_full_model_is_taken_when_nothing_can_be_dropped():
@@ -188,4 +156,4 @@ def test_replay_takes_per_layout_the_smallest_model_within_the_tolerance():
             assert f'model: {expected} (' in text
             for name, peak in segment.peak_support.items():
                 assert abs(peak - reference.peak_support[name]) <= \
-                    segment.choice.deviation.force + 1e-9 * peak
+                    segment.choice.deviation.force + 2e-15 * peak

@@ -14,7 +14,8 @@ def test_ramp_is_followed_without_lag():
     alpha = 2.5
     estimates = [estimator.update(k * 1e-3, 3.0 + alpha * k * 1e-3) for k in range(500)]
     assert estimates[0] == 0.0
-    assert all(e == pytest.approx(alpha, rel=1e-9) for e in estimates[1:])
+    # Measured: 3.4e-13 relative at most (the sums' rounding, as old samples fade).
+    assert all(e == pytest.approx(alpha, rel=2e-12) for e in estimates[1:])
 
 
 def test_irregular_sample_times():
@@ -24,7 +25,7 @@ def test_irregular_sample_times():
     for _ in range(2000):
         t += rng.uniform(2e-4, 3e-3)
         estimate = estimator.update(t, -1.0 - 0.7 * t)
-    assert estimate == pytest.approx(-0.7, rel=1e-8)
+    assert estimate == pytest.approx(-0.7, rel=5e-13)            # measured 5.6e-14
 
 
 def test_noise_is_suppressed_against_the_raw_difference():
@@ -44,7 +45,8 @@ def test_noise_is_suppressed_against_the_raw_difference():
         previous = omega
     rms_raw = math.sqrt(sum(a * a for a in raw) / len(raw))
     rms_smooth = math.sqrt(sum(a * a for a in smooth) / len(smooth))
-    assert rms_raw == pytest.approx(sigma * math.sqrt(2) / dt, rel=0.05)
+    # An rms over 2e4 samples scatters by 1 / sqrt(2 N) = 0.5 %: measured 0.55 % off.
+    assert rms_raw == pytest.approx(sigma * math.sqrt(2) / dt, rel=0.02)
     # Weighted least squares: var(slope) = sigma^2 / sum(w (t - mean)^2) ~ 4 sigma^2 dt / tau^3
     # for the steady state of exponential weights; allow the estimate's own scatter.
     expected = sigma * math.sqrt(4 * dt / tau**3)
@@ -59,14 +61,15 @@ def test_step_in_alpha_is_reached_within_eight_time_constants():
         alpha = 0.0 if k < 100 else 4.0
         omega += alpha * dt
         estimate = estimator.update(k * dt, omega)
-    assert estimate == pytest.approx(4.0, rel=0.01)
+    # What is left of the step after 8 tau: measured 1.6e-3 relative.
+    assert estimate == pytest.approx(4.0, rel=4e-3)
 
 
 def test_speed_is_integrated_to_an_angle():
     integrator = AngleIntegrator()
     for k in range(1001):   # omega = 2 t over 1 s: q = t^2 = 1 rad (trapezoid: exact)
         q = integrator.update(k * 1e-3, 2.0 * k * 1e-3)
-    assert q == pytest.approx(1.0, rel=1e-12)
+    assert q == pytest.approx(1.0, rel=1e-14)                    # measured 3.3e-16
 
 
 @pytest.mark.parametrize('time, last, angle, omega, word', [

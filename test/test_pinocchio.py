@@ -2,9 +2,10 @@
 The engine and ``cvc-balance solve`` against Pinocchio's rigid-body dynamics.
 
 Random layouts (all shapes, given inertias, z offsets, one and two supports),
-tilted gravity, alpha != 0: the loads must agree with Pinocchio's RNEA to
-1e-9 relative. Supports are checked by statics: they must carry exactly the
-total load Pinocchio transmits through the joint.
+tilted gravity, alpha != 0: the loads must agree with Pinocchio's RNEA (relative error
+of each vector; measured per test below). Supports are checked by statics here (they
+must carry the total load Pinocchio transmits through the joint) and each on its own
+in test_edge_cases.py.
 """
 
 import json
@@ -20,7 +21,13 @@ from cvc_balance.physics.engine import loads, RotorModel, sample_loads
 from cvc_balance.physics.layout import parse_layout
 from reference import pinocchio_loads, random_layout, relative_error
 
-TOLERANCE = 1e-9
+TOLERANCE = 1e-13
+"""Relative error of each vector, one sample: measured 1.3e-14 at most over the 40 layouts."""
+VECTORISED = 1e-12
+"""The same per sample of the vectorised path with per-sample gravity: measured 1.6e-13
+(a vector ~100 times smaller than its terms, e.g. a moment at a near-balanced instant)."""
+COMMAND_LINE = 2e-14
+"""``cvc-balance solve --json`` (printed with repr, read back exactly): measured 2.5e-15."""
 
 
 def _support_resultant(supports, per_support):
@@ -71,14 +78,14 @@ def test_vectorised_loads_match_pinocchio_per_sample(seed):
     for i in range(n):
         ref = pinocchio_loads(layout, q[i], omega[i], alpha[i], gravity[i])
         for key in ('force_rotor', 'moment_rotor', 'force_stator', 'moment_stator'):
-            assert relative_error(getattr(result, key)[i], ref[key]) < TOLERANCE, key
-        assert relative_error(result.drive_torque[i], ref['drive_torque']) < TOLERANCE
+            assert relative_error(getattr(result, key)[i], ref[key]) < VECTORISED, key
+        assert relative_error(result.drive_torque[i], ref['drive_torque']) < VECTORISED
         per_support = {s['name']: (result.support_force[s['name']][i],
                                    result.support_moment[s['name']][i])
                        for s in layout['supports']}
         force, moment = _support_resultant(layout['supports'], per_support)
-        assert relative_error(force, ref['force_stator']) < TOLERANCE
-        assert relative_error(moment, ref['moment_stator']) < TOLERANCE
+        assert relative_error(force, ref['force_stator']) < VECTORISED
+        assert relative_error(moment, ref['moment_stator']) < VECTORISED
 
 
 def test_vectorised_path_spans_several_chunks():
@@ -88,11 +95,13 @@ def test_vectorised_path_spans_several_chunks():
     n = 70_001
     q, omega, alpha = rng.uniform(-7, 7, n), rng.uniform(-40, 40, n), rng.uniform(-9, 9, n)
     result = loads(model, q, omega, alpha)
-    for i in (0, 32_767, 32_768, 65_536, n - 1):
+    # The last sample of the first block (65535) and the first of the second; measured:
+    # equal to the last bit (every sample of three blocks: test_edge_cases.py).
+    for i in (0, 32_767, 32_768, 65_535, 65_536, n - 1):
         one = sample_loads(model, q[i], omega[i], alpha[i])
-        np.testing.assert_allclose(result.force_stator[i], one.force_stator, rtol=1e-12)
-        np.testing.assert_allclose(result.moment_rotor[i], one.moment_rotor, rtol=1e-12,
-                                   atol=1e-9)
+        np.testing.assert_allclose(result.force_stator[i], one.force_stator, rtol=1e-14)
+        np.testing.assert_allclose(result.moment_rotor[i], one.moment_rotor, rtol=1e-14,
+                                   atol=1e-12)
 
 
 @pytest.mark.parametrize('seed', range(8))
@@ -114,11 +123,11 @@ def test_solve_json_matches_pinocchio_on_unseen_layouts(seed, tmp_path):
     got = json.loads(run.stdout)
     ref = pinocchio_loads(layout, math.radians(angle_deg), omega, alpha, gravity)
     for key in ('force_rotor', 'moment_rotor', 'force_stator', 'moment_stator'):
-        assert relative_error(got[key], ref[key]) < TOLERANCE, key
-    assert relative_error(got['drive_torque'], ref['drive_torque']) < TOLERANCE
-    assert relative_error(got['mass'], ref['mass']) < TOLERANCE
-    assert relative_error(got['com'], ref['com']) < TOLERANCE
+        assert relative_error(got[key], ref[key]) < COMMAND_LINE, key
+    assert relative_error(got['drive_torque'], ref['drive_torque']) < COMMAND_LINE
+    assert relative_error(got['mass'], ref['mass']) < COMMAND_LINE
+    assert relative_error(got['com'], ref['com']) < COMMAND_LINE
     per_support = {name: (s['force'], s['moment']) for name, s in got['supports'].items()}
     force, moment = _support_resultant(layout['supports'], per_support)
-    assert relative_error(force, ref['force_stator']) < TOLERANCE
-    assert relative_error(moment, ref['moment_stator']) < TOLERANCE
+    assert relative_error(force, ref['force_stator']) < COMMAND_LINE
+    assert relative_error(moment, ref['moment_stator']) < COMMAND_LINE

@@ -93,7 +93,10 @@ def test_logged_values_equal_the_engine_at_sampled_times(logged):
             (at,) = np.nonzero(times == ns)
             assert len(at) == 1, path
             scale = np.abs(logged_values).max()
-            assert abs(logged_values[at[0]] - value) <= 1e-9 * scale, path
+            # Measured, of each plot's peak: omega 0, support loads 8.3e-15 at most,
+            # alpha and drive torque 1.5e-13 (two implementations of the estimator).
+            bound = 1e-12 if path in ('/plots/speed/alpha', '/plots/drive_torque') else 4e-14
+            assert abs(logged_values[at[0]] - value) <= bound * scale, path
     assert len(scalars['/plots/speed/omega'][0]) == len(stamps)   # every sample
 
 
@@ -216,7 +219,8 @@ def test_live_node_logs_the_same_view(tmp_path):
                        ('/plots/drive_torque', lambda ns: expected[ns]['/drive_torque'][5])):
         times, values = scalars[path]
         reference = np.array([pick(int(ns)) for ns in times])
-        assert np.abs(values - reference).max() <= 1e-9 * np.abs(reference).max(), path
+        # Measured: omega 0, drive torque 7.1e-14 of its peak.
+        assert np.abs(values - reference).max() <= 1e-12 * np.abs(reference).max(), path
 
 
 def test_shapes_below_the_view_resolution_are_drawn_as_points(tmp_path):

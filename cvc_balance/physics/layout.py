@@ -538,12 +538,26 @@ def one_line(message, limit=300):
     return text if len(text) <= limit else text[:limit] + f'... ({len(text)} characters)'
 
 
+def _plain_scalar(item):
+    """Tell whether ``item`` prints in a few characters (a number, a short string, None)."""
+    if item is None or isinstance(item, (bool, float)):
+        return True
+    if isinstance(item, int):
+        return item.bit_length() <= 64
+    return isinstance(item, str) and len(item) <= 20
+
+
 def short(value, limit=40):
     """
     Return ``value`` for an error message: one line, at most about ``limit`` characters.
 
-    Containers are described, not printed (a bad value may be megabytes).
+    Containers are described, not printed (a bad value may be megabytes), except a short
+    list of plain scalars, which says more printed (``[0.0, -9.8]``).
     """
+    if isinstance(value, (list, tuple)) and len(value) <= 6 and all(map(_plain_scalar, value)):
+        text = repr(list(value))
+        if len(text) <= limit:
+            return text
     if isinstance(value, (dict, list, tuple, set)):
         return f'a {_kind(value)} of {len(value)} items'
     if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:

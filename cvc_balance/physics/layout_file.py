@@ -115,7 +115,9 @@ def _parse(text, source):
         return loader.construct_document(node)
     except yaml.YAMLError as error:
         mark = getattr(error, 'problem_mark', None)
-        where = f' line {mark.line + 1}' if mark is not None else ''
+        # libyaml marks a problem found at the end of the text on the line after the last.
+        last_line = max(1, len(text.splitlines()))
+        where = f' line {min(mark.line + 1, last_line)}' if mark is not None else ''
         problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
         raise LayoutError(f'{source}:{where}: not valid YAML or JSON: {short(problem, 80)}') \
             from None

@@ -77,9 +77,9 @@ def scenes(rng):
 def _near_balance(layout):
     """Two point masses that cancel static and couple unbalance, off by 1e-9."""
     from cvc_balance.physics.layout import Component
-    from cvc_balance.study.exact import aggregates
+    from cvc_balance.study.exact import unbalance_about_o
     from dataclasses import replace
-    mass, sx, sy, sz, pxz, pyz, _ = (float(v) for v in aggregates(layout))
+    (sx, sy), (pxz, pyz) = ((float(v) for v in pair) for pair in unbalance_about_o(layout))
     z1, z2, radius = -0.25, 0.25, 0.6
     # Plane unbalances to cancel (two-plane split), then 1e-9 of the mass moment left over.
     u1 = ((z2 * sx - pxz) / (z2 - z1), (z2 * sy - pyz) / (z2 - z1))

@@ -1,0 +1,198 @@
+"""
+Mutation testing of the physics and the contract modules, module by module (mutmut).
+
+Each module is mutated with mutmut (``requirements-mutation.txt``, installed into the
+environment on first use) in a copy of the work tree, against the tests that guard it
+(:data:`MODULES`): mutmut runs, for each mutant, only those of them that call the
+mutated function. Prints per module killed / total and the kill rate, writes the
+surviving mutants' diffs to ``<work>/<module>/survivors.txt`` and a summary to
+``<work>/summary.json``. Outside CI (it takes a while): on this 2-core machine, run it
+at low priority::
+
+    nice -n 19 ./dev.sh run python benchmarks/mutation.py            # every module
+    nice -n 19 ./dev.sh run python benchmarks/mutation.py engine motion   # some
+
+A mutant is killed when a test fails (or it times out, or the type of its crash is a
+test failure); it survives when every test that reaches it passes; "no tests" means
+no selected test calls the mutated function.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = Path(__file__).resolve().parents[1]
+REQUIREMENTS = ROOT / 'requirements-mutation.txt'
+
+PHYSICS = ['test/test_pinocchio.py', 'test/test_thesis.py', 'test/test_edge_cases.py',
+           'test/test_methods.py']
+"""Fast and independent: Pinocchio, the thesis, the 40-digit reference. The hypothesis
+properties, the model choice's replays and the whole pipelines (rerun, the node) are left
+out: a surviving mutant runs every selected test, and those took minutes each."""
+MODULES = {
+    # name: (module file, tests that guard it)
+    'engine': ('cvc_balance/physics/engine.py', PHYSICS),
+    'layout': ('cvc_balance/physics/layout.py',
+               ['test/test_layout.py', 'test/test_layout_messages.py',
+                'test/test_edge_cases.py', 'test/test_unbalance.py']),
+    'inertia': ('cvc_balance/physics/inertia.py', PHYSICS + ['test/test_stability.py']),
+    'compensated': ('cvc_balance/physics/compensated.py',
+                    ['test/test_stability.py', 'test/test_pinocchio.py']),
+    'motion': ('cvc_balance/physics/motion.py',
+               ['test/test_motion.py', 'test/test_edge_cases.py']),
+    'unbalance': ('cvc_balance/physics/unbalance.py',
+                  ['test/test_unbalance.py', 'test/test_edge_cases.py',
+                   'test/test_layout_messages.py']),
+    'iso21940': ('cvc_balance/physics/iso21940.py',
+                 ['test/test_unbalance.py', 'test/test_edge_cases.py',
+                  'test/test_layout_messages.py']),
+    'assessment': ('cvc_balance/physics/assessment.py',
+                   ['test/test_unbalance.py', 'test/test_edge_cases.py',
+                    'test/test_layout_messages.py']),
+    'model_choice': ('cvc_balance/physics/model_choice.py',
+                     ['test/test_model_choice.py', 'test/test_edge_cases.py']),
+    'replay': ('cvc_balance/bag/replay.py', ['test/test_bags.py', 'test/test_edge_cases.py']),
+    'mcap_writer': ('cvc_balance/bag/mcap_writer.py',
+                    ['test/test_bags.py', 'test/test_edge_cases.py']),
+    'mcap_reader': ('cvc_balance/bag/mcap_reader.py',
+                    ['test/test_bags.py', 'test/test_edge_cases.py']),
+    'scenario': ('cvc_balance/bag/scenario.py', ['test/test_bags.py']),
+    'cdr': ('cvc_balance/messages/cdr.py',
+            ['test/test_cdr.py', 'test/test_edge_cases.py', 'test/test_bags.py']),
+}
+DESELECT = [
+    # Tests that start ROS processes or the rerun viewer: slow, and they reach the
+    # modules through other processes, which mutmut's test selection cannot see.
+    'test/test_bags.py::test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk',
+    'test/test_bags.py::test_rerun_opens_a_project_bag',
+    # The command line's refusals start a process per case (about 1 s each, for each of
+    # layout.py's 760 mutants): test_layout_messages.py has their in-process half, every
+    # message in full.
+    'test/test_layout.py::test_bad_layout_gets_one_line_and_exit_code_2',
+    'test/test_layout.py::test_yaml_nan_is_rejected',
+    'test/test_layout.py::test_unreadable_and_malformed_files',
+    'test/test_layout.py::test_bad_speed_on_the_command_line',
+    'test/test_layout.py::test_solve_table_names_every_support_and_the_verdict',
+]
+MILLION = ['test/test_stability.py::test_a_million_components_keep_a_residual_of_1e_11_of_'
+           'their_mass_moment',
+           'test/test_stability.py::test_float64_sums_lose_the_million_component_residual']
+"""Ten seconds and more a run: they guard the compensated sums (kept for that module)."""
+COPY = ('cvc_balance', 'test', 'config', 'bags', 'docs', 'resource', 'pytest.ini',
+        'package.xml', 'setup.py', 'setup.cfg')
+
+
+def ensure_mutmut():
+    """Install the pinned mutmut into this environment if it is not there."""
+    try:
+        import mutmut  # noqa: F401
+    except ImportError:
+        subprocess.run([sys.executable, '-m', 'pip', 'install', '-q', '-r', str(REQUIREMENTS)],
+                       check=True)
+
+
+def toml_list(values):
+    return '[' + ', '.join(json.dumps(str(v)) for v in values) + ']'
+
+
+def prepare(work, module, tests):
+    """Copy the tree (tracked and new files) to ``work``, with mutmut's settings for a module."""
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    listed = subprocess.run(['git', 'ls-files', '-co', '--exclude-standard'], cwd=ROOT,
+                            capture_output=True, text=True).stdout.split('\n')
+    if listed == ['']:          # not a git checkout (an exported tree): every file
+        listed = [str(p.relative_to(ROOT)) for p in ROOT.rglob('*') if p.is_file()]
+    for name in listed:
+        if name and name.split('/')[0] in COPY and (ROOT / name).is_file():
+            target = work / name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, target)
+    present = [t for t in tests if (work / t).exists()]
+    deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION)
+    args = ['-p', 'no:cacheprovider', '-q'] + [f'--deselect={d}' for d in deselect]
+    (work / 'pyproject.toml').write_text(
+        '[tool.mutmut]\n'
+        'source_paths = ["cvc_balance"]\n'
+        f'only_mutate = {toml_list([module])}\n'
+        f'pytest_add_cli_args = {toml_list(args)}\n'
+        f'pytest_add_cli_args_test_selection = {toml_list(present)}\n'
+        f'also_copy = {toml_list(["config", "bags", "docs", "resource", "pytest.ini"])}\n'
+        'use_git_change_detection = false\n'
+        'process_isolation = "forkserver"\n'
+        'timeout_multiplier = 8.0\n'
+        'timeout_constant = 10.0\n')
+    return present
+
+
+def run_module(name, work, children):
+    """Run mutmut on one module; return its counts and the survivors' diffs."""
+    module, tests = MODULES[name]
+    present = prepare(work, module, tests)
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE='1', RERUN_TELEMETRY_ENABLED='false')
+    started = time.monotonic()
+    log = open(work / 'mutmut.log', 'w')
+    subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children)],
+                   cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
+    seconds = time.monotonic() - started
+    subprocess.run([sys.executable, '-m', 'mutmut', 'export-cicd-stats'], cwd=work, env=env,
+                   stdout=log, stderr=subprocess.STDOUT)
+    stats_path = work / 'mutants' / 'mutmut-cicd-stats.json'
+    if not stats_path.exists():
+        raise SystemExit(f'{name}: mutmut gave no results; see {work / "mutmut.log"}')
+    stats = json.loads(stats_path.read_text())
+    results = subprocess.run([sys.executable, '-m', 'mutmut', 'results'], cwd=work, env=env,
+                             capture_output=True, text=True).stdout
+    survivors = []
+    for line in results.splitlines():
+        mutant, _, status = line.strip().rpartition(': ')
+        if mutant:
+            diff = subprocess.run([sys.executable, '-m', 'mutmut', 'show', mutant], cwd=work,
+                                  env=env, capture_output=True, text=True).stdout
+            survivors.append((mutant, status, diff))
+    with open(work / 'survivors.txt', 'w') as stream:
+        for mutant, status, diff in survivors:
+            stream.write(f'## {mutant}: {status}\n{diff}\n')
+    return {'module': module, 'tests': present, 'seconds': round(seconds, 1), **stats}
+
+
+def main():
+    """Run the modules asked for (default all) and print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('modules', nargs='*', metavar='MODULE',
+                        help=f'modules to mutate (default: all): {", ".join(MODULES)}')
+    parser.add_argument('--work', type=Path, default=Path('/tmp/cvc_balance_mutation'),
+                        help='where the copies go (default %(default)s)')
+    parser.add_argument('--children', type=int, default=2, help='mutants tested at once')
+    args = parser.parse_args()
+    unknown = [m for m in args.modules if m not in MODULES]
+    if unknown:
+        parser.error(f'unknown module {unknown[0]!r} (known: {", ".join(MODULES)})')
+    ensure_mutmut()
+    summary_path = args.work / 'summary.json'
+    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    for name in args.modules or list(MODULES):
+        row = run_module(name, args.work / name, args.children)
+        summary[name] = row
+        args.work.mkdir(parents=True, exist_ok=True)
+        summary_path.write_text(json.dumps(summary, indent=1))
+        print(f"{name:13} killed {row['killed']:4d} of {row['total']:4d} "
+              f'({100.0 * row["killed"] / max(row["total"], 1):5.1f} %), '
+              f"survived {row['survived']}, no tests {row['no_tests']}, "
+              f"timeout {row['timeout']}, {row['seconds']:.0f} s", flush=True)
+    print('\n| module | killed / total | kill rate | survived | no tests | timeout |')
+    print('|---|---|---|---|---|---|')
+    for name, row in summary.items():
+        print(f"| {name} | {row['killed']} / {row['total']} | "
+              f"{100.0 * row['killed'] / max(row['total'], 1):.1f} % | {row['survived']} | "
+              f"{row['no_tests']} | {row['timeout']} |")
+
+
+if __name__ == '__main__':
+    main()

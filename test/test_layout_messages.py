@@ -1,0 +1,299 @@
+"""
+The layout contract in full: every refusal's whole message, the balancing settings' effect.
+
+The messages are part of the contract (README: one line naming the component and the
+field, then what is wrong and the value given); their whole text is written here, so that
+a changed message is a decision and not an accident. In-process and fast, so that the
+mutation run (benchmarks/mutation.py) can afford them; test_layout.py checks the command
+line's exit code and single line for the same kinds of mistake.
+"""
+
+import hashlib
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.layout import DEFAULT_GRADE, LayoutError, parse_layout
+
+
+def good():
+    """Return a valid layout mapping: two components, two supports, no balancing settings."""
+    return {'name': 'ok',
+            'components': [{'name': 'tube', 'mass': 60.0, 'radius': 0.6, 'angle_deg': 0.0,
+                            'z': 0.05, 'shape': {'type': 'cylinder', 'radius': 0.09,
+                                                 'length': 0.35, 'axis': 'tangential'}},
+                           {'name': 'detector', 'mass': 50.0, 'radius': 0.4,
+                            'angle_deg': 180.0}],
+            'supports': [{'name': 'front', 'z': -0.25},
+                         {'name': 'rear', 'z': 0.25, 'axial': True}]}
+
+
+def component(index, **change):
+    def edit(layout):
+        layout['components'][index].update(change)
+    return edit
+
+
+def drop(index, key, where='components'):
+    def edit(layout):
+        layout[where][index].pop(key)
+    return edit
+
+
+def top(**change):
+    def edit(layout):
+        layout.update(change)
+    return edit
+
+
+def shape(**spec):
+    return component(0, shape=spec)
+
+
+def support(index, **change):
+    def edit(layout):
+        layout['supports'][index].update(change)
+    return edit
+
+
+BOX = {'ixx': 1.0, 'iyy': 1.0, 'izz': 1.0, 'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}
+REFUSED = [
+    # layout
+    (lambda d: d.clear() or d.update(name='x'), 'layout: missing field components'),
+    (lambda d: d.pop('name'), 'layout: missing field name'),
+    (lambda d: d.pop('supports'), 'layout: missing field supports'),
+    (top(name=''), "layout: field name must be a non-empty string, got ''"),
+    (top(name=3), 'layout: field name must be a non-empty string, got 3'),
+    (top(description=4), 'layout: field description must be a non-empty string, got 4'),
+    (top(components={}), 'layout: field components: expected a list, got dict'),
+    (top(components=[]), 'layout: field components: needs at least one component'),
+    (top(colour='red'), "layout: unknown field 'colour' (known: name, description, "
+                        'components, supports, gravity, balancing)'),
+    (top(gravity=[0.0, -9.8]), 'layout: field gravity must be a list of 3 numbers, got '
+                               '[0.0, -9.8]'),
+    (top(gravity=[0.0, 'down', 0.0]), "layout: field gravity[1] must be a number, got 'down'"),
+    (top(gravity=[0.0, math.inf, 0.0]), 'layout: field gravity[1] must be finite, got inf'),
+    # components
+    (lambda d: d['components'].append([]), 'component #3: expected a mapping of fields, '
+                                           'got list'),
+    (drop(1, 'name'), 'component #2: missing field name'),
+    (component(1, name=''), "component #2: field name must be a non-empty string, got ''"),
+    (component(1, name='tube'), "component 'tube': duplicate name (names must be unique)"),
+    (drop(1, 'mass'), "component 'detector': missing field mass"),
+    (component(0, mass=True), "component 'tube': field mass must be a number, got True"),
+    (component(0, mass=0.0), "component 'tube': field mass must be > 0, got 0"),
+    (component(0, mass=math.nan), "component 'tube': field mass must be finite, got nan"),
+    (drop(1, 'radius'), "component 'detector': missing field radius"),
+    (component(1, radius=-0.1), "component 'detector': field radius must be >= 0, got -0.1"),
+    (component(1, angle=1.0), "component 'detector': give exactly one of fields angle (rad) "
+                              'and angle_deg'),
+    (drop(1, 'angle_deg'), "component 'detector': give exactly one of fields angle (rad) "
+                           'and angle_deg'),
+    (component(1, angle_deg='north'), "component 'detector': field angle_deg must be a "
+                                      "number, got 'north'"),
+    (lambda d: d['components'][1].pop('angle_deg') and d['components'][1].update(angle=None),
+     "component 'detector': field angle must be a number, got None"),
+    (component(1, z=math.inf), "component 'detector': field z must be finite, got inf"),
+    (component(1, colour='red'), "component 'detector': unknown field 'colour' (known: "
+                                 'name, mass, radius, angle, angle_deg, z, shape, inertia)'),
+    (component(0, inertia=BOX), "component 'tube': give field shape or field inertia, not "
+                                'both'),
+    # shapes
+    (component(0, shape='round'), "component 'tube': field shape: expected a mapping of "
+                                  'fields, got str'),
+    (shape(type='cone'), "component 'tube': field shape.type: unknown shape 'cone', "
+                         'expected one of point, cylinder, tube, box, sphere'),
+    (shape(type='cylinder', radius=0.1), "component 'tube': field shape: missing field "
+                                         'length'),
+    (shape(type='cylinder', radius=0.0, length=0.2), "component 'tube': field shape.radius "
+                                                     'must be > 0, got 0'),
+    (shape(type='cylinder', radius=0.1, length=0.2, axis='diagonal'),
+     "component 'tube': field shape.axis: unknown axis 'diagonal', expected one of radial, "
+     'tangential, axial'),
+    (shape(type='sphere', radius=0.1, axis='radial'),
+     "component 'tube': field shape (sphere): unknown field 'axis' (known: type, radius)"),
+    (shape(type='box'), "component 'tube': field shape: missing field size"),
+    (shape(type='box', size=[0.1, 0.2]), "component 'tube': field shape.size must be a list "
+                                         'of 3 numbers, got [0.1, 0.2]'),
+    (shape(type='box', size=[0.1, 0.0, 0.2]), "component 'tube': field shape.size[1] must be "
+                                              '> 0, got 0'),
+    (shape(type='tube', inner_radius=0.2, outer_radius=0.2, length=0.1),
+     "component 'tube': field shape.inner_radius must be less than outer_radius"),
+    (shape(type='point', radius=0.1), "component 'tube': field shape (point): unknown field "
+                                      "'radius' (known: type)"),
+    # given inertia
+    (lambda d: d['components'][1].update(inertia=[1, 1, 1]),
+     "component 'detector': field inertia: expected a mapping of fields, got list"),
+    (lambda d: d['components'][1].update(inertia={k: v for k, v in BOX.items()
+                                                  if k != 'iyz'}),
+     "component 'detector': field inertia: missing field iyz"),
+    (lambda d: d['components'][1].update(inertia=dict(BOX, ixz='big')),
+     "component 'detector': field inertia.ixz must be a number, got 'big'"),
+    (lambda d: d['components'][1].update(inertia=dict(BOX, jxx=1.0)),
+     "component 'detector': field inertia: unknown field 'jxx' (known: ixx, iyy, izz, ixy, "
+     'ixz, iyz)'),
+    (lambda d: d['components'][1].update(inertia=dict(BOX, izz=3.0)),
+     "component 'detector': field inertia: not the inertia of a body (principal moments 1, "
+     '1, 3 kg m^2 must be >= 0 and satisfy the triangle inequality)'),
+    # supports
+    (top(supports={}), 'layout: field supports: expected a list, got dict'),
+    (top(supports=[]), 'layout: field supports: needs 1 or 2 supports, got 0'),
+    (lambda d: d['supports'].append({'name': 'mid', 'z': 0.0}),
+     'layout: field supports: needs 1 or 2 supports, got 3'),
+    (lambda d: d['supports'].__setitem__(0, 'front'), 'support #1: expected a mapping of '
+                                                      'fields, got str'),
+    (drop(0, 'name', 'supports'), 'support #1: missing field name'),
+    (support(1, name=5), 'support #2: field name must be a non-empty string, got 5'),
+    (drop(1, 'z', 'supports'), "support 'rear': missing field z"),
+    (support(1, z='far'), "support 'rear': field z must be a number, got 'far'"),
+    (support(1, stiffness=1e9), "support 'rear': unknown field 'stiffness' (known: name, z, "
+                                'axial)'),
+    (support(1, axial='yes'), "support 'rear': field axial must be true or false, got 'yes'"),
+    (support(1, name='front'), "support 'front': duplicate name (names must be unique)"),
+    (support(1, z=-0.25), 'layout: field supports: the two supports need different z'),
+    (support(0, axial=True), 'layout: field supports: mark exactly one of the two supports '
+                             'axial: true (it takes the axial force)'),
+    (drop(1, 'axial', 'supports'), 'layout: field supports: mark exactly one of the two '
+                                   'supports axial: true (it takes the axial force)'),
+    # balancing
+    (top(balancing=[]), 'layout: field balancing: expected a mapping of fields, got list'),
+    (top(balancing={'radius': 0.6}), "layout: field balancing: unknown field 'radius' "
+                                     '(known: planes, correction_radius, grade, '
+                                     'service_speed, sites)'),
+    (top(balancing={'planes': [0.2]}), 'layout: field balancing.planes must be a list of 2 '
+                                       'numbers, got [0.2]'),
+    (top(balancing={'planes': [0.2, 0.2]}), 'layout: field balancing.planes: give [z_I, '
+                                            'z_II] with z_I < z_II'),
+    (top(balancing={'correction_radius': 0.0}), 'layout: field balancing.correction_radius '
+                                                'must be > 0, got 0'),
+    (top(balancing={'grade': 0.0}), 'layout: field balancing.grade must be > 0, got 0'),
+    (top(balancing={'grade': 'G6.3'}), "layout: field balancing.grade must be a number, "
+                                       "got 'G6.3'"),
+    (top(balancing={'service_speed': -1.0}), 'layout: field balancing.service_speed must be '
+                                             '> 0, got -1'),
+]
+
+
+def test_a_layout_must_be_a_mapping():
+    with pytest.raises(LayoutError) as error:
+        parse_layout([good()])
+    assert str(error.value) == 'layout: expected a mapping of fields, got list'
+
+
+@pytest.mark.parametrize('change, message', REFUSED, ids=[m[:60] for _, m in REFUSED])
+def test_refusal_names_what_is_wrong_in_one_line(change, message):
+    layout = good()
+    change(layout)
+    with pytest.raises(LayoutError) as error:
+        parse_layout(layout)
+    assert str(error.value) == message
+
+
+def test_what_is_accepted_at_the_edges():
+    """Zero radius, negative z and angles, point shapes, bodies on the triangle's edge."""
+    layout = good()
+    layout['components'][1].update(radius=0.0, z=-0.3, angle_deg=-720.0)
+    layout['components'].append({'name': 'screw', 'mass': 1e-6, 'radius': 0.5, 'angle': -7.0,
+                                 'shape': {'type': 'point'}})
+    # A thin disc (izz = ixx + iyy), a thin rod (one principal moment 0) and a small body
+    # (trace 1e-4 kg m^2) on the edge: bodies, given to the last bit.
+    layout['components'].append({'name': 'disc', 'mass': 2.0, 'radius': 0.3, 'angle': 1.0,
+                                 'inertia': {'ixx': 0.1, 'iyy': 0.2, 'izz': 0.30000000000000004,
+                                             'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}})
+    layout['components'].append({'name': 'rod', 'mass': 1.0, 'radius': 0.3, 'angle': 2.0,
+                                 'inertia': {'ixx': 0.0, 'iyy': 0.05, 'izz': 0.05,
+                                             'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}})
+    layout['components'].append({'name': 'chip', 'mass': 0.01, 'radius': 0.3, 'angle': 3.0,
+                                 'inertia': {'ixx': 2e-5, 'iyy': 3e-5, 'izz': 5e-5,
+                                             'ixy': 0.0, 'ixz': 0.0, 'iyz': 0.0}})
+    layout['supports'] = [{'name': 'slewing', 'z': 0.0, 'axial': False}]
+    layout['description'] = 'a gantry with a screw, a disc, a rod and a chip'
+    parsed = parse_layout(layout)
+    assert parsed.description == layout['description']
+    assert [c.name for c in parsed.components] == ['tube', 'detector', 'screw', 'disc', 'rod',
+                                                   'chip']
+    assert parsed.components[1].angle == pytest.approx(-4 * math.pi, rel=1e-15)
+    assert parsed.components[2].shape.type == 'point'
+    assert parsed.supports[0].axial is False and parsed.correction_planes() is None
+
+
+@pytest.mark.parametrize('elements, scale', [
+    # Off the triangle by 1e-6 of the trace: refused, however small the body.
+    ((1.0, 1.0, 2.000002, 0.0, 0.0, 0.0), 1.0),
+    ((1.0, 1.0, 2.000002, 0.0, 0.0, 0.0), 1e-5),
+    # A principal moment below zero by 1e-6 of the trace.
+    ((-2e-6, 1.0, 1.0, 0.0, 0.0, 0.0), 1.0),
+    ((-2e-6, 1.0, 1.0, 0.0, 0.0, 0.0), 1e-5),
+])
+def test_tensors_no_body_has_are_refused_at_any_size(elements, scale):
+    layout = good()
+    layout['components'][1]['inertia'] = dict(zip(('ixx', 'iyy', 'izz', 'ixy', 'ixz', 'iyz'),
+                                                  (v * scale for v in elements)))
+    with pytest.raises(LayoutError, match="component 'detector': field inertia: not the "
+                                          'inertia of a body'):
+        parse_layout(layout)
+
+
+def test_digest_is_a_short_sha256_of_the_canonical_json():
+    """
+    12 hex digits of SHA-256 over the layout's fields as JSON, keys sorted, no spaces.
+
+    The same layout (from a mapping in another order) has the same digest; any change of a
+    number changes it.
+    """
+    layout = parse_layout(good())
+    fields = {'name': 'ok', 'description': '', 'gravity': [0.0, -9.80665, 0.0],
+              'balancing': {'planes': None, 'correction_radius': None, 'grade': 6.3,
+                            'service_speed': None},
+              'supports': [{'name': 'front', 'z': -0.25, 'axial': False},
+                           {'name': 'rear', 'z': 0.25, 'axial': True}],
+              'components': [
+                  {'name': 'tube', 'mass': 60.0, 'radius': 0.6, 'angle': 0.0, 'z': 0.05,
+                   'shape': {'type': 'cylinder', 'radius': 0.09, 'length': 0.35,
+                             'inner_radius': 0.0, 'outer_radius': 0.0, 'size': [],
+                             'axis': 'tangential'}, 'inertia': None},
+                  {'name': 'detector', 'mass': 50.0, 'radius': 0.4, 'angle': math.pi,
+                   'z': 0.0, 'shape': None, 'inertia': None}]}
+    canonical = json.dumps(fields, sort_keys=True, separators=(',', ':'))
+    assert layout.digest() == hashlib.sha256(canonical.encode()).hexdigest()[:12]
+    reordered = {k: good()[k] for k in ('supports', 'components', 'name')}
+    assert parse_layout(reordered).digest() == layout.digest()
+    heavier = good()
+    heavier['components'][0]['mass'] = 60.000000001
+    assert parse_layout(heavier).digest() != layout.digest()
+
+
+def test_balancing_settings_take_effect():
+    """
+    Planes, correction radius, grade and service speed as given; defaults otherwise.
+
+    By hand: the two-plane split of ISO 21940-2 per component, U_per = G m / Omega.
+    """
+    layout = good()
+    layout['balancing'] = {'planes': [-0.1, 0.3], 'correction_radius': 0.5, 'grade': 2.5,
+                           'service_speed': 30.0}
+    parsed = parse_layout(layout)
+    assert parsed.correction_planes() == (-0.1, 0.3)
+    assert parsed.correction_radius() == 0.5
+    assessment = assess_balance(RotorModel.from_layout(parsed))
+    assert (assessment.omega, assessment.grade) == (30.0, 2.5)
+    u = [(60.0 * 0.6 * complex(1.0, 0.0), 0.05), (50.0 * 0.4 * complex(-1.0, 0.0), 0.0)]
+    plane_1 = sum(ui * (0.3 - z) / 0.4 for ui, z in u)
+    plane_2 = sum(ui * (z + 0.1) / 0.4 for ui, z in u)
+    for plane, ref, z in zip(assessment.planes, (plane_1, plane_2), (-0.1, 0.3)):
+        assert plane.z == z
+        assert abs(complex(*plane.vector) - ref) < 1e-15 * 60.0   # measured: 1 ulp
+        assert plane.correction_radius == 0.5
+        assert plane.correction_mass == pytest.approx(abs(ref) / 0.5, rel=1e-15)
+    assert assessment.permissible == pytest.approx(2.5e-3 * 110.0 / 30.0, rel=1e-15)
+    defaults = parse_layout(good())
+    assert defaults.balancing.grade == DEFAULT_GRADE == 6.3
+    assert defaults.balancing.service_speed is None and defaults.balancing.planes is None
+    assert defaults.correction_radius() == 0.6
+    with pytest.raises(ValueError, match='service speed'):
+        assess_balance(RotorModel.from_layout(defaults))
+    np.testing.assert_array_equal(defaults.placement[0], [60.0, 50.0])
