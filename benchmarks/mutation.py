@@ -64,6 +64,13 @@ MODULES = {
     'scenario': ('cvc_balance/bag/scenario.py', ['test/test_bags.py']),
     'cdr': ('cvc_balance/messages/cdr.py',
             ['test/test_cdr.py', 'test/test_edge_cases.py', 'test/test_bags.py']),
+    # Measured loads, field balancing and design: their own hand- and Pinocchio-checked tests.
+    'identify_regressors': ('cvc_balance/identify/regressors.py', ['test/test_identify.py']),
+    'identify_fit': ('cvc_balance/identify/fit.py', ['test/test_identify.py']),
+    'identify_estimate': ('cvc_balance/identify/estimate.py', ['test/test_identify.py']),
+    'field_coefficients': ('cvc_balance/field/coefficients.py', ['test/test_field.py']),
+    'field_correction': ('cvc_balance/field/correction.py', ['test/test_field.py']),
+    'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
 }
 DESELECT = [
     # Tests that start ROS processes or the rerun viewer: slow, and they reach the
