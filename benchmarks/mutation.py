@@ -44,7 +44,7 @@ MODULES = {
     'compensated': ('cvc_balance/physics/compensated.py',
                     ['test/test_stability.py', 'test/test_pinocchio.py']),
     'motion': ('cvc_balance/physics/motion.py',
-               ['test/test_motion.py', 'test/test_edge_cases.py']),
+               ['test/test_motion.py', 'test/test_stamp_gate.py', 'test/test_edge_cases.py']),
     'unbalance': ('cvc_balance/physics/unbalance.py',
                   ['test/test_unbalance.py', 'test/test_edge_cases.py',
                    'test/test_layout_messages.py']),

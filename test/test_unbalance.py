@@ -62,6 +62,24 @@ def test_plane_unbalances_match_the_two_plane_formula(seed):
         assert abs(correction + complex(ref)) < 1e-15 * size     # U_corr = -U_plane
 
 
+def test_no_correction_mass_without_a_correction_radius():
+    """
+    Point masses all on the axis: no radius to put a correction at, so no correction mass.
+
+    The layout's default correction radius is then 0 (no component off the axis, no shape):
+    each plane still has its unbalance (here 0) and angle, its correction mass is None, not
+    a division by zero; a radius given by hand gives the mass U / r.
+    """
+    model = points([(5.0, 0.0, 0.0, -0.1), (7.0, 0.0, 1.0, 0.2)])
+    assert model.layout.correction_radius() == 0.0
+    for plane in plane_unbalances(model, -0.3, 0.3, model.layout.correction_radius()):
+        assert plane.amount == 0.0 and plane.correction_mass is None
+    off_axis = points([(5.0, 0.0, 0.0, -0.1), (0.02, 0.5, 1.0, 0.3)])
+    plane_1, plane_2 = plane_unbalances(off_axis, -0.3, 0.3, 0.25)
+    assert plane_2.correction_mass == pytest.approx(0.02 * 0.5 * 0.6 / 0.6 / 0.25, rel=1e-15)
+    assert plane_1.correction_mass == 0.0
+
+
 def test_static_and_couple_unbalance_of_a_pure_couple():
     """Equal and opposite m r at z = -d and +d: no static; couple 2 m r d at the +z angle."""
     m, r, d, angle = 2.0, 0.5, 0.15, 0.7
