@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from cvc_balance.physics import iso21940
-from cvc_balance.physics.assessment import assess_balance
+from cvc_balance.physics.assessment import assess_balance, judge_balance, judging_speed
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.layout_file import load_layout
@@ -145,3 +145,83 @@ def test_gantry_assessment_against_a_per_component_reference():
         * layout.balancing.grade
     assert assessment.equivalent_grade == pytest.approx(expected, rel=1e-14)
     assert assessment.within_grade == (expected <= layout.balancing.grade)
+
+
+def rotor_with_a_bolt(**balancing):
+    """A 100 kg drum on the axis with a 10 g bolt at 0.5 m, z = 0, planes at -/+0.4 m."""
+    return RotorModel.from_layout(parse_layout({
+        'name': 'drum_and_bolt', 'supports': [{'name': 'a', 'z': -0.4},
+                                              {'name': 'b', 'z': 0.4, 'axial': True}],
+        'components': [{'name': 'drum', 'mass': 100.0, 'radius': 0.0, 'angle': 0.0},
+                       {'name': 'bolt', 'mass': 0.01, 'radius': 0.5, 'angle': 0.0}],
+        'balancing': {'planes': [-0.4, 0.4], **balancing}}))
+
+
+def bolt_grade(omega):
+    """
+    The drum and bolt's achieved grade at ``omega`` by hand (ISO 21940-11), mm/s.
+
+    U = 0.005 kg m, half in each plane; the centre of mass midway, so each plane's share of
+    U_per = G m / omega is 0.5: G = (0.0025 / 0.5) omega / m, in mm/s.
+    """
+    return 0.0025 / 0.5 * omega / 100.01 * 1e3
+
+
+def test_the_verdict_is_judged_at_the_service_speed_whatever_the_rotor_does():
+    """
+    The service speed judges; the speed seen never does then (ISO 21940-11).
+
+    G 1.163 at 23.27 rad/s: within G 6.3 (OK), within G 1.3 but beyond 0.8 of it (WARN),
+    out of G 1.0 (ERROR); the text as people read it.
+    """
+    model = rotor_with_a_bolt(service_speed=23.27, grade=6.3)
+    for top_speed in (0.0, 5.0, -50.0, 1e3):
+        assert judging_speed(model.layout, top_speed) == (23.27, 'service speed')
+        verdict = judge_balance(model, top_speed)
+        assert (verdict.level, verdict.grade, verdict.speed_source, verdict.warn_fraction) == \
+            ('OK', 6.3, 'service speed', 0.8)
+        assert verdict.assessment.omega == 23.27
+        assert verdict.assessment.equivalent_grade == pytest.approx(bolt_grade(23.27),
+                                                                    rel=1e-14)
+    assert judge_balance(model, grade=1.3).level == 'WARN'
+    error = judge_balance(model, grade=1.0)
+    assert (error.level, error.grade) == ('ERROR', 1.0)
+    assert error.text == f'G {bolt_grade(23.27):.3g} at the service speed 23.27 rad/s: ' \
+        'OUT OF G 1'
+    assert judge_balance(model, warn_fraction=0.1).level == 'WARN'   # 1.16 > 0.63
+    slow = rotor_with_a_bolt(service_speed=0.5)
+    assert judging_speed(slow.layout, 30.0) == (0.5, 'service speed')
+
+
+def test_without_a_service_speed_the_top_speed_seen_judges():
+    """|top speed| judges when the layout names no service speed; nothing seen: not judged."""
+    model = rotor_with_a_bolt(grade=1.0)
+    assert judging_speed(model.layout, -40.0) == (40.0, 'top speed seen')
+    assert judging_speed(model.layout, 0.5) == (0.5, 'top speed seen')
+    assert judging_speed(model.layout, 0.0) == (None, None)
+    verdict = judge_balance(model, -40.0)
+    assert (verdict.level, verdict.speed_source) == ('ERROR', 'top speed seen')
+    assert verdict.assessment.omega == 40.0
+    assert verdict.assessment.equivalent_grade == pytest.approx(bolt_grade(40.0), rel=1e-14)
+    assert judge_balance(model, 4.0).level == 'OK'          # G 0.2 at 4 rad/s
+    unjudged = judge_balance(model, 0.0, warn_fraction=0.7)
+    assert (unjudged.level, unjudged.grade, unjudged.assessment, unjudged.speed_source,
+            unjudged.warn_fraction) == ('NOT JUDGED', 1.0, None, None, 0.7)
+    assert unjudged.words == 'NOT JUDGED'
+    assert unjudged.text == ('balance grade not judged: the layout names no service speed '
+                             '(balancing.service_speed) and the rotor has not turned')
+
+
+def test_a_grade_met_exactly_is_within_it():
+    """
+    Achieved == grade is within (ERROR only beyond); achieved == warn_fraction x grade is OK.
+
+    The grade is the rotor's own achieved grade, so the comparison is exact; 0.5 x 2 G is
+    exact in binary.
+    """
+    model = rotor_with_a_bolt(service_speed=23.27)
+    achieved = judge_balance(model).assessment.equivalent_grade
+    exactly = judge_balance(model, grade=achieved)
+    assert exactly.level == 'WARN' and exactly.words == f'WITHIN G {achieved:g}, NEAR ITS LIMIT'
+    assert judge_balance(model, grade=2 * achieved, warn_fraction=0.5).level == 'OK'
+    assert judge_balance(model, grade=achieved * (1 - 1e-15)).level == 'ERROR'
