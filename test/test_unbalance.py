@@ -188,7 +188,11 @@ def test_the_verdict_is_judged_at_the_service_speed_whatever_the_rotor_does():
     assert (error.level, error.grade) == ('ERROR', 1.0)
     assert error.text == f'G {bolt_grade(23.27):.3g} at the service speed 23.27 rad/s: ' \
         'OUT OF G 1'
-    assert judge_balance(model, warn_fraction=0.1).level == 'WARN'   # 1.16 > 0.63
+    near = judge_balance(model, warn_fraction=0.1)
+    assert (near.level, near.warn_fraction) == ('WARN', 0.1)          # 1.16 > 0.63
+    assert error.assessment.grade == 1.0                  # judged against the grade asked
+    assert error.assessment.permissible == pytest.approx(1e-3 * 100.01 / 23.27,
+                                                         rel=1e-15)
     slow = rotor_with_a_bolt(service_speed=0.5)
     assert judging_speed(slow.layout, 30.0) == (0.5, 'service speed')
 
@@ -198,7 +202,8 @@ def test_without_a_service_speed_the_top_speed_seen_judges():
     model = rotor_with_a_bolt(grade=1.0)
     assert judging_speed(model.layout, -40.0) == (40.0, 'top speed seen')
     assert judging_speed(model.layout, 0.5) == (0.5, 'top speed seen')
-    assert judging_speed(model.layout, 0.0) == (None, None)
+    assert judging_speed(model.layout, 0.0) == judging_speed(model.layout) == (None, None)
+    assert judge_balance(model).level == 'NOT JUDGED'      # no speed seen by default
     verdict = judge_balance(model, -40.0)
     assert (verdict.level, verdict.speed_source) == ('ERROR', 'top speed seen')
     assert verdict.assessment.omega == 40.0
