@@ -70,3 +70,55 @@ def test_vectorised_gate_decides_as_the_live_one(steps, max_jump):
         expect_ok.append(gate.check(stamp) is None)
         expect_restart.append(gate.restarted)
     assert accepted.tolist() == expect_ok and restarted.tolist() == expect_restart
+
+
+def test_the_gates_boundaries_and_words():
+    """
+    Each boundary as the docstring states it, with stamps exact in binary.
+
+    A step of exactly max_jump is plausible; a repeated stamp is not after the previous;
+    a stamp late by exactly max_jump is only late (no new time line); a glitch repeated
+    is no time line; a new time line stepping exactly max_jump is followed.
+    """
+    assert decide([0.5, 1.0], 0.5) == [(True, False), (True, False)]
+    gate = StampGate(1.0)
+    assert gate.check(2.0) is None
+    assert gate.check(1.5) == 'stamp 1.500000000 s not after the previous 2.000000000 s'
+    assert gate.check(2.0) == 'stamp 2.000000000 s not after the previous 2.000000000 s'
+    assert gate.check(6.0) == ('stamp 6.000000000 s jumps 4 s past the previous (more than '
+                               'max_stamp_jump 1 s)')
+    assert [ok for ok, _ in decide([10.0, 9.0, 9.5], 1.0)] == [True, False, False]
+    assert decide([0.0, 100.0, 100.0, 0.5], 1.0) == [
+        (True, False), (False, False), (False, False), (True, False)]
+    assert decide([0.0, 100.0, 101.0], 1.0) == [(True, False), (False, False), (True, True)]
+    assert [ok for ok, _ in decide([0.0, 1e9], math.inf)] == [True, True]
+    assert StampGate().max_jump == math.inf
+    with pytest.raises(ValueError, match=r'^max_jump must be > 0 s, got 0$'):
+        StampGate(0)
+
+
+def test_replay_restarts_alpha_where_the_time_line_restarts():
+    """
+    accepted_motion: the default max_stamp_jump (1 s), alpha afresh on the new time line.
+
+    Two ramps, 0.5 rad/s^2 from t = 0 and 2 rad/s^2 from t = 1000 s (a restarted driver):
+    the first sample after the step is rejected (a jump), the next follows the new line;
+    each segment's alpha is the live estimator's over that segment alone.
+    """
+    from cvc_balance.physics.motion import accepted_motion, AccelerationEstimator
+    t1, t2 = np.arange(0, 200) * 0.01, 1000.0 + np.arange(0, 200) * 0.01
+    time = np.concatenate([t1, t2])
+    omega = np.concatenate([1.0 + 0.5 * t1, 3.0 + 2.0 * (t2 - 1000.0)])
+    angle = np.zeros_like(time)
+    accepted, restarted = gate_samples(time, angle, omega, 100.0, 1.0)
+    assert restarted.dtype == bool and np.flatnonzero(restarted).tolist() == [201]
+    assert np.flatnonzero(~accepted).tolist() == [200]
+    taken, alpha = accepted_motion(time, angle, omega, 100.0, 0.1)
+    np.testing.assert_array_equal(taken, accepted)
+    expected = []
+    for segment in (slice(0, 200), slice(201, 400)):
+        estimator = AccelerationEstimator(0.1)
+        expected += [estimator.update(t, w) for t, w in zip(time[segment], omega[segment])]
+    np.testing.assert_allclose(alpha, expected, rtol=1e-9, atol=1e-12)
+    assert alpha[200] == 0.0 and alpha[-1] == pytest.approx(2.0, rel=1e-9)
+    assert alpha[199] == pytest.approx(0.5, rel=1e-9)
