@@ -148,7 +148,7 @@ def test_gantry_assessment_against_a_per_component_reference():
 
 
 def rotor_with_a_bolt(**balancing):
-    """A 100 kg drum on the axis with a 10 g bolt at 0.5 m, z = 0, planes at -/+0.4 m."""
+    """Make a 100 kg drum on the axis with a 10 g bolt at 0.5 m, z = 0, planes at -/+0.4 m."""
     return RotorModel.from_layout(parse_layout({
         'name': 'drum_and_bolt', 'supports': [{'name': 'a', 'z': -0.4},
                                               {'name': 'b', 'z': 0.4, 'axial': True}],
@@ -159,7 +159,7 @@ def rotor_with_a_bolt(**balancing):
 
 def bolt_grade(omega):
     """
-    The drum and bolt's achieved grade at ``omega`` by hand (ISO 21940-11), mm/s.
+    Return the drum and bolt's achieved grade at ``omega`` by hand (ISO 21940-11), mm/s.
 
     U = 0.005 kg m, half in each plane; the centre of mass midway, so each plane's share of
     U_per = G m / omega is 0.5: G = (0.0025 / 0.5) omega / m, in mm/s.
