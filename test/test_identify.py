@@ -290,3 +290,67 @@ def test_channels_of_one_and_two_supports():
     single = parse_layout({'name': 's', 'components': [component],
                            'supports': [{'name': 'x', 'z': 0.0}]})
     assert channels(single.supports) == [(0, 'force'), (0, 'moment')]
+
+
+def test_sums_and_their_solution_against_numpy_least_squares():
+    """
+    The fit's sums and solution against numpy's complex least squares of the same readings.
+
+    Readings y = c_S S + c_P P + b_k + noise on channels 0 and 2 of three (channel 1 has
+    none: its bias stays 0). Sums made one reading at a time equal those made from arrays
+    in two parts and the sums' definitions; the estimate equals numpy's lstsq, with sigma^2
+    = |residual|^2 / (2 n - 2 p) (real degrees of freedom) and (A^H A)^-1 for (S, P).
+    """
+    from cvc_balance.identify.fit import Sums
+    rng = np.random.default_rng(7)
+    n = 400
+    c_s = rng.normal(size=n) + 1j * rng.normal(size=n)
+    c_p = rng.normal(size=n) + 1j * rng.normal(size=n)
+    channel = np.where(rng.random(n) < 0.5, 0, 2)
+    truth_s, truth_p, bias = 0.3 - 0.2j, -0.05 + 0.1j, {0: 5.0 + 1.0j, 2: -3.0 + 0.5j}
+    y = c_s * truth_s + c_p * truth_p + np.array([bias[c] for c in channel]) \
+        + 0.01 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    one_by_one, from_arrays = Sums(3), Sums(3)
+    for k in range(n):
+        one_by_one.add(int(channel[k]), complex(c_s[k]), complex(c_p[k]), complex(y[k]))
+    for part in (slice(0, 150), slice(150, n)):
+        for c in (0, 2):
+            pick = np.flatnonzero(channel[part] == c) + part.start
+            from_arrays.add_arrays(c, c_s[pick], c_p[pick], y[pick])
+    definition = {'ss': np.sum(abs(c_s) ** 2), 'sp': np.sum(np.conj(c_s) * c_p),
+                  'pp': np.sum(abs(c_p) ** 2), 'ys': np.sum(np.conj(c_s) * y),
+                  'yp': np.sum(np.conj(c_p) * y), 'yy': np.sum(abs(y) ** 2)}
+    for sums in (one_by_one, from_arrays):
+        for name, value in definition.items():
+            assert getattr(sums, name) == pytest.approx(value, rel=1e-12), name
+        for c in range(3):
+            mine = channel == c
+            assert sums.count[c] == mine.sum()
+            assert sums.sb[c] == pytest.approx(np.sum(np.conj(c_s[mine])), abs=1e-9)
+            assert sums.pb[c] == pytest.approx(np.sum(np.conj(c_p[mine])), abs=1e-9)
+            assert sums.yb[c] == pytest.approx(np.sum(y[mine]), abs=1e-9)
+    design = np.column_stack([c_s, c_p, channel == 0, channel == 2]).astype(complex)
+    theta = np.linalg.lstsq(design, y, rcond=None)[0]
+    residual = y - design @ theta
+    sigma = math.sqrt(np.sum(abs(residual) ** 2) / (2 * n - 2 * 4))
+    inverse = np.linalg.inv(design.conj().T @ design)[:2, :2]
+    for sums in (one_by_one, from_arrays):
+        fit = sums.solve()
+        assert fit.identifiable and fit.readings == n
+        assert fit.static == pytest.approx(theta[0], rel=1e-10)
+        assert fit.products == pytest.approx(theta[1], rel=1e-10)
+        assert fit.biases[0] == pytest.approx(theta[2], rel=1e-10) and fit.biases[1] == 0j
+        assert fit.biases[2] == pytest.approx(theta[3], rel=1e-10)
+        assert fit.sigma == pytest.approx(sigma, rel=1e-6)
+        np.testing.assert_allclose(fit.inverse, inverse, rtol=1e-10, atol=1e-16)
+
+
+def test_what_cannot_be_told_is_said_whole():
+    """Too few readings: nothing identified, every interval infinite, the count kept."""
+    from cvc_balance.identify.fit import Sums
+    sums = Sums(2)
+    sums.add(0, 1.0 + 0j, 0.5j, 2.0 + 0j)
+    fit = sums.solve()
+    assert (fit.static, fit.products, fit.biases, fit.sigma, fit.readings,
+            fit.identifiable) == (0j, 0j, (0j, 0j), math.inf, 1, False)
+    assert fit.inverse.shape == (2, 2) and np.all(fit.inverse == math.inf)
