@@ -354,3 +354,60 @@ def test_what_cannot_be_told_is_said_whole():
     assert (fit.static, fit.products, fit.biases, fit.sigma, fit.readings,
             fit.identifiable) == (0j, 0j, (0j, 0j), math.inf, 1, False)
     assert fit.inverse.shape == (2, 2) and np.all(fit.inverse == math.inf)
+
+
+def test_unbalance_and_its_circles_from_a_fit_by_hand():
+    """
+    Static, couple and plane unbalance of a fit, and each 95 % radius, by hand.
+
+    With S and P about O from the fit, the centre of mass at z_c and planes z_I < z_II
+    (b = z_II - z_I): static S (weights (1, 0)); couple P - z_c S ((-z_c, 1)); planes
+    U_I = (z_II S - P) / b ((z_II / b, -1 / b)) and U_II = (P - z_I S) / b ((-z_I / b,
+    1 / b)). A vector w_S S + w_P P has the 95 % radius sqrt(chi2_2(0.95) sigma^2 w^H N w)
+    with chi2_2(0.95) = -2 ln 0.05. The residual is identified - declared with the fit's
+    radii; the layout's own unbalance is exact (radius 0); not identifiable carries through.
+    """
+    from cvc_balance.identify.estimate import rotor_with
+    from cvc_balance.identify.fit import Estimate
+    model = RotorModel.from_layout(parse_layout({
+        'name': 'offset', 'supports': [{'name': 'a', 'z': -0.5},
+                                       {'name': 'b', 'z': 0.5, 'axial': True}],
+        'components': [{'name': 'drum', 'mass': 30.0, 'radius': 0.0, 'angle': 0.0, 'z': 0.1},
+                       {'name': 'tube', 'mass': 10.0, 'radius': 0.5, 'angle': 0.3, 'z': -0.2}],
+        'balancing': {'planes': [-0.3, 0.4]}}))
+    z_c, (z_1, z_2) = (30.0 * 0.1 - 10.0 * 0.2) / 40.0, (-0.3, 0.4)
+    b = z_2 - z_1
+    s, p, sigma = 0.2 - 0.7j, 0.05 + 0.02j, 3.0
+    inverse = np.array([[2e-6, 1e-7 + 2e-7j], [1e-7 - 2e-7j, 5e-6]])
+    fit = Estimate(s, p, (1.0 + 0j,), sigma, inverse, 1000, True)
+    chi2 = -2.0 * math.log(0.05)
+
+    def radius(w_s, w_p):
+        w = np.array([w_s, w_p])
+        return math.sqrt(chi2 * sigma ** 2 * float(np.real(np.conj(w) @ inverse @ w)))
+    found = identified_unbalance(model, fit)
+    expected = [(found.static, s, (1.0, 0.0)), (found.couple, p - z_c * s, (-z_c, 1.0)),
+                (found.planes[0][1], (z_2 * s - p) / b, (z_2 / b, -1.0 / b)),
+                (found.planes[1][1], (p - z_1 * s) / b, (-z_1 / b, 1.0 / b))]
+    for vector, value, weights in expected:
+        assert vector.value == pytest.approx(value, rel=1e-14, abs=1e-16)
+        assert vector.ci95 == pytest.approx(radius(*weights), rel=1e-12)
+    assert [z for z, _ in found.planes] == [z_1, z_2] and found.identifiable
+    declared = layout_unbalance(model)
+    assert declared.identifiable
+    assert all(v.ci95 == 0.0 for v in (declared.static, declared.couple,
+                                       declared.planes[0][1], declared.planes[1][1]))
+    u = 10.0 * 0.5 * complex(math.cos(0.3), math.sin(0.3))
+    declared_values = [u, u * (-0.2 - z_c), u * (z_2 + 0.2) / b, u * (-0.2 - z_1) / b]
+    off = residual(found, declared)
+    pairs = zip((off.static, off.couple, off.planes[0][1], off.planes[1][1]), expected,
+                declared_values)
+    for vector, (_, value, weights), known in pairs:
+        assert vector.value == pytest.approx(value - known, rel=1e-13, abs=1e-15)
+        assert vector.ci95 == pytest.approx(radius(*weights), rel=1e-12)
+    assert off.identifiable
+    assert rotor_with(model, s, p).layout is model.layout     # the verdict reads it
+    blind = identified_unbalance(model, Estimate(s, p, (0j,), math.inf,
+                                                 np.full((2, 2), math.inf), 3, False))
+    assert not blind.identifiable and not residual(blind, declared).identifiable
+    assert blind.static.ci95 == math.inf and blind.planes[1][1].ci95 == math.inf
