@@ -101,16 +101,20 @@ def test_replay_restarts_alpha_where_the_time_line_restarts():
     """
     accepted_motion: the default max_stamp_jump (1 s), alpha afresh on the new time line.
 
-    Two ramps, 0.5 rad/s^2 from t = 0 and 2 rad/s^2 from t = 1000 s (a restarted driver):
-    the first sample after the step is rejected (a jump), the next follows the new line;
-    each segment's alpha is the live estimator's over that segment alone.
+    Two ramps, 0.5 rad/s^2 from t = 0 and 2 rad/s^2 from t = 3.5 s (a driver restarted
+    1.5 s on): the first sample after the step is rejected (a jump), the next follows the
+    new line; each segment's alpha is the live estimator's over that segment alone (the
+    first segment's samples, 15 time constants old, would move its first alpha by 0.66).
     """
-    from cvc_balance.physics.motion import accepted_motion, AccelerationEstimator
-    t1, t2 = np.arange(0, 200) * 0.01, 1000.0 + np.arange(0, 200) * 0.01
+    from cvc_balance.physics.motion import (accepted_motion, accepted_samples,
+                                            AccelerationEstimator)
+    t1, t2 = np.arange(0, 200) * 0.01, 3.5 + np.arange(0, 200) * 0.01
     time = np.concatenate([t1, t2])
-    omega = np.concatenate([1.0 + 0.5 * t1, 3.0 + 2.0 * (t2 - 1000.0)])
+    omega = np.concatenate([1.0 + 0.5 * t1, 3.0 + 2.0 * (t2 - 3.5)])
     angle = np.zeros_like(time)
     accepted, restarted = gate_samples(time, angle, omega, 100.0, 1.0)
+    np.testing.assert_array_equal(accepted_samples(time, angle, omega, 100.0, 1.0), accepted)
+    assert accepted_samples(time, angle, omega, 100.0).all()     # no jump limit: all in order
     assert restarted.dtype == bool and np.flatnonzero(restarted).tolist() == [201]
     assert np.flatnonzero(~accepted).tolist() == [200]
     taken, alpha = accepted_motion(time, angle, omega, 100.0, 0.1)
@@ -119,6 +123,6 @@ def test_replay_restarts_alpha_where_the_time_line_restarts():
     for segment in (slice(0, 200), slice(201, 400)):
         estimator = AccelerationEstimator(0.1)
         expected += [estimator.update(t, w) for t, w in zip(time[segment], omega[segment])]
-    np.testing.assert_allclose(alpha, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(alpha, expected, rtol=1e-10, atol=1e-12)
     assert alpha[200] == 0.0 and alpha[-1] == pytest.approx(2.0, rel=1e-9)
     assert alpha[199] == pytest.approx(0.5, rel=1e-9)
