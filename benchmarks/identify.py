@@ -91,6 +91,7 @@ def accuracy(windows, noises, seeds):
 def chart(table, path, seeds):
     """Draw the rms error and the standard error against the window, per noise."""
     import matplotlib
+    import matplotlib.ticker
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
@@ -101,6 +102,9 @@ def chart(table, path, seeds):
                   label=f'rms error, cell noise {noise:g} N')
         ax.loglog(windows, [r[2] * 1e6 for r in rows], '--', color=colour,
                   label=f'standard error (fit), {noise:g} N')
+    # The windows themselves as ticks, in plain numbers (log axes' minor labels collide).
+    ax.set_xticks(windows, [f'{w:g}' for w in windows])
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel('window (revolutions at 23.27 rad/s, cells at 250 Hz)')
     ax.set_ylabel('static unbalance error (g mm)')
     ax.set_title('Identified unbalance: error against window and cell noise\n'
