@@ -411,3 +411,40 @@ def test_unbalance_and_its_circles_from_a_fit_by_hand():
                                                  np.full((2, 2), math.inf), 3, False))
     assert not blind.identifiable and not residual(blind, declared).identifiable
     assert blind.static.ci95 == math.inf and blind.planes[1][1].ci95 == math.inf
+
+
+def test_the_fits_edges_against_numpy():
+    """
+    Small regressors, a channel of one reading, exactly as many readings as unknowns.
+
+    Regressors of 1e-3 (every normal-equation diagonal under 1) are still a fit; a channel
+    with a single reading has its bias fitted to it (numpy's least squares with that
+    column), so it leaves S and P alone; n readings for n complex unknowns leave no degree
+    of freedom for the noise: not identifiable.
+    """
+    from cvc_balance.identify.fit import Sums
+    rng = np.random.default_rng(11)
+    n = 60
+    c_s = 1e-3 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    c_p = 1e-3 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    channel = np.zeros(n, int)
+    channel[17] = 1                                  # channel 1: one reading
+    y = 40.0 * c_s - 7.0j * c_p + np.where(channel == 1, 9.0, 2.0) \
+        + 1e-4 * (rng.normal(size=n) + 1j * rng.normal(size=n))
+    sums = Sums(2)
+    for k in range(n):
+        sums.add(int(channel[k]), complex(c_s[k]), complex(c_p[k]), complex(y[k]))
+    assert sums.ss < 1.0 and sums.pp < 1.0
+    fit = sums.solve()
+    design = np.column_stack([c_s, c_p, channel == 0, channel == 1]).astype(complex)
+    theta = np.linalg.lstsq(design, y, rcond=None)[0]
+    assert fit.identifiable
+    assert fit.static == pytest.approx(theta[0], rel=1e-8)
+    assert fit.products == pytest.approx(theta[1], rel=1e-8)
+    assert fit.biases[1] == pytest.approx(theta[3], rel=1e-8)
+    exact = Sums(1)
+    for k in range(3):                               # 3 readings, 3 unknowns (S, P, bias)
+        exact.add(0, complex(c_s[k]), complex(c_p[k]), complex(y[k]))
+    assert not exact.solve().identifiable and exact.solve().sigma == math.inf
+    exact.add(0, complex(c_s[3]), complex(c_p[3]), complex(y[3]))
+    assert exact.solve().identifiable
