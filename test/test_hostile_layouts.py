@@ -228,3 +228,20 @@ def test_the_fast_canonical_json_is_asdicts(seed):
     data = asdict(layout)
     del data['balancing']['sites']
     assert layout.canonical_json() == json.dumps(data, sort_keys=True, separators=(',', ':'))
+
+
+@pytest.mark.parametrize('name', ['tube', 'a "quoted" name', 'back\\slash', 'tab\there',
+                                  'del\x7f', 'Röhre', '管球', 'emoji \U0001f600', 'x' * 200,
+                                  ' leading and trailing ', '</script>', "it's"])
+def test_names_in_the_canonical_json_are_json_dumps(name):
+    # Printable ASCII names skip json.dumps; every other name must come out as it would.
+    from dataclasses import asdict
+    try:
+        layout = parse_layout({'name': name, 'components': [
+            {'name': name, 'mass': 1.0, 'radius': 0.1, 'angle': 0.5}],
+            'supports': [{'name': 'a', 'z': 0.0, 'axial': True}]})
+    except LayoutError:
+        return                          # names the contract refuses never reach the digest
+    data = asdict(layout)
+    del data['balancing']['sites']
+    assert layout.canonical_json() == json.dumps(data, sort_keys=True, separators=(',', ':'))
