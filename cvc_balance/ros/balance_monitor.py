@@ -177,6 +177,7 @@ class BalanceMonitor(Node):
         self._reported_level = None
         self._peak_load = 0.0
         self._last_rejection = ''
+        self._last_logged = {}          # throttled log messages: key -> monotonic time
         self._period_rejected = 0
         self._internal_errors = 0
         self._reported_measured = None
@@ -233,7 +234,7 @@ class BalanceMonitor(Node):
         """Count a message rclpy could not hand over (the spin loop's ``on_error``)."""
         self._internal_errors += 1
         self._last_rejection = f'a message rclpy could not convert: {one_line(error, 200)}'
-        self.get_logger().error(self._last_rejection, throttle_duration_sec=THROTTLE_S)
+        self._log_throttled('lost', self.get_logger().error, self._last_rejection)
 
     def _guarded(self, callback):
         """
@@ -249,8 +250,8 @@ class BalanceMonitor(Node):
                 self._internal_errors += 1
                 self._last_rejection = (f'internal error in {callback.__name__}: '
                                         f'{type(error).__name__}: {one_line(error, 200)}')
-                self.get_logger().error(self._last_rejection,
-                                        throttle_duration_sec=THROTTLE_S)
+                self._log_throttled('internal', self.get_logger().error,
+                                    self._last_rejection)
         return guarded
 
     def emit_rotor(self, topic, sec, nanosec, force, torque):
@@ -299,8 +300,8 @@ class BalanceMonitor(Node):
         active = self._active
         if active is None:
             self._counts['dropped'] += 1
-            self.get_logger().warning('no layout yet: motion samples dropped',
-                                      throttle_duration_sec=THROTTLE_S)
+            self._log_throttled('dropped', self.get_logger().warning,
+                                'no layout yet: motion samples dropped')
             return
         time = sec + nanosec * 1e-9
         problem = sample_problem(time, None, angle, omega, self.params['max_speed']) or \
@@ -363,7 +364,20 @@ class BalanceMonitor(Node):
         self._counts['rejected'] += 1
         self._period_rejected += 1
         self._last_rejection = reason
-        self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=THROTTLE_S)
+        self._log_throttled('rejected', self.get_logger().warning, f'rejected {reason}')
+
+    def _log_throttled(self, key, log, message):
+        """
+        Log ``message`` with ``log`` at most once every THROTTLE_S seconds per ``key``.
+
+        Not rclpy's ``throttle_duration_sec``: that walks the caller's frames on every call,
+        logged or not, and under the events executor the node's native memory grew with it
+        (78 -> 88 MB in 30 s of 5 kHz rejected samples; flat with this clock check).
+        """
+        now = monotonic()
+        if now - self._last_logged.get(key, -math.inf) >= THROTTLE_S:
+            self._last_logged[key] = now
+            log(message)
 
     # -- layout ----------------------------------------------------------------------
 
