@@ -68,7 +68,8 @@ MODULES = {
     'identify_regressors': ('cvc_balance/identify/regressors.py', ['test/test_identify.py']),
     'identify_fit': ('cvc_balance/identify/fit.py', ['test/test_identify.py']),
     'identify_estimate': ('cvc_balance/identify/estimate.py', ['test/test_identify.py']),
-    'field_influence': ('cvc_balance/field/influence.py', ['test/test_field.py']),
+    'field_influence': ('cvc_balance/field/influence.py',
+                        ['test/test_field.py', 'test/test_field_checks.py']),
     'field_correction': ('cvc_balance/field/correction.py', ['test/test_field.py']),
     'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
 }
