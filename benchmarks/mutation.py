@@ -70,7 +70,8 @@ MODULES = {
     'identify_estimate': ('cvc_balance/identify/estimate.py', ['test/test_identify.py']),
     'field_influence': ('cvc_balance/field/influence.py',
                         ['test/test_field.py', 'test/test_field_checks.py']),
-    'field_correction': ('cvc_balance/field/correction.py', ['test/test_field.py']),
+    'field_correction': ('cvc_balance/field/correction.py',
+                         ['test/test_field.py', 'test/test_field_checks.py']),
     'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
 }
 DESELECT = [

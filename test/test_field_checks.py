@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from cvc_balance.field import calibrate, Trial
+from cvc_balance.field import calibrate, continuous_correction, Trial
 
 ALPHA = np.array([[600 + 0j, 70j], [-400 + 200j, 60 - 10j], [80 + 5j, 610 - 300j]])
 BASELINE = np.array([120 + 40j, -90 + 10j, 30 - 75j])
@@ -116,3 +116,71 @@ def test_planes_acting_alike_are_said_to():
         f'the coefficients are ill-conditioned (condition number {found.condition:.3g}): the '
         'planes act nearly alike on these sensors, and reading errors are amplified up to '
         'that many times in the corrections')
+
+
+def test_the_balancing_problem_and_its_residual_by_hand():
+    """
+    Problems from readings and from a known unbalance, the residual's measures, the limits.
+
+    One plane, two sensors: the weighted least-squares correction is
+    u = -sum w^2 conj(a) A / sum w^2 |a|^2; rms = sqrt(sum (w |r|)^2 / channels with a
+    weight), total = sum w |r|, worst = max |r| / limit.
+    """
+    from cvc_balance.field import BalancingProblem
+    from cvc_balance.field.correction import (problem_from_readings, problem_from_unbalance,
+                                              with_unbalance_limits)
+    trials = [trial('I', 200, 30)]
+    alpha = np.array([[600 + 0j], [-400 + 200j]])
+    baseline = np.array([120 + 40j, -90 + 10j])
+    found = calibrate(baseline, trials, [baseline + alpha[:, 0] * trials[0].unbalance],
+                      ['a', 'b'])
+    weights, limits = np.array([1.0, 0.25]), np.array([50.0, 400.0])
+    problem = problem_from_readings(found, baseline, weights, limits, 'g')
+    assert (problem.planes, problem.channels, problem.unit) == (('I',), ('a', 'b'), 'g')
+    assert problem.limits.dtype == float and problem.influence.dtype == complex
+    np.testing.assert_allclose(problem.influence, alpha, rtol=1e-12)
+    a, w = alpha[:, 0], weights
+    u = -np.sum(w ** 2 * np.conj(a) * baseline) / np.sum(w ** 2 * abs(a) ** 2)
+    assert continuous_correction(problem)[0] == pytest.approx(u, rel=1e-12)
+    r = baseline + a * u
+    np.testing.assert_allclose(problem.residual([u]), r, rtol=1e-12)
+    left = problem.measure([u])
+    assert left.rms == pytest.approx(math.sqrt(np.sum((w * abs(r)) ** 2) / 2), rel=1e-12)
+    assert left.total == pytest.approx(np.sum(w * abs(r)), rel=1e-12)
+    assert left.worst == pytest.approx(max(abs(r) / limits), rel=1e-12)
+    assert left.within_limits == (left.worst <= 1.0)
+    plain = problem_from_readings(found, baseline)
+    np.testing.assert_array_equal(plain.weights, [1.0, 1.0])
+    assert plain.limits is None and plain.unit == 'kg m'
+    assert plain.measure([0j]).worst is None and plain.measure([0j]).within_limits is None
+    with pytest.raises(ValueError, match=r'^1 readings for 2 sensors$'):
+        problem_from_readings(found, baseline[:1])
+    # A known unbalance per plane: the channels are the planes, weighed by 1 / U_per.
+    known = problem_from_unbalance(['I', 'II'], [0.3 + 0.1j, -0.2j], [0.5, 0.25])
+    assert known.planes == known.channels == ('I', 'II') and known.unit == 'kg m'
+    np.testing.assert_array_equal(known.influence, np.eye(2))
+    np.testing.assert_array_equal(known.weights, [2.0, 4.0])
+    np.testing.assert_array_equal(known.limits, [0.5, 0.25])
+    exact = continuous_correction(known)
+    np.testing.assert_allclose(exact, [-0.3 - 0.1j, 0.2j], rtol=1e-14)
+    assert known.measure([0j, 0j]).within_limits is True          # 0.32 / 0.5, 0.2 / 0.25
+    assert known.measure([0j, -0.1j]).worst == pytest.approx(0.3 / 0.25, rel=1e-14)
+    assert known.measure([0j, -0.1j]).within_limits is False
+    free = problem_from_unbalance(['I'], [0.3])
+    np.testing.assert_array_equal(free.weights, [1.0])
+    assert free.limits is None
+    # Each plane's unbalance as a channel that only limits: weight 0, moved 1:1 by its plane.
+    in_kg_m = BalancingProblem(('I',), ('a', 'b'), baseline, alpha, weights)
+    limited = with_unbalance_limits(in_kg_m, ['I', 'II'], [0.4 + 0.3j, 0.1], [0.45, 0.2])
+    assert limited.channels == ('a', 'b', 'plane I unbalance', 'plane II unbalance')
+    np.testing.assert_array_equal(limited.influence[2:], [[1.0], [0.0]])
+    np.testing.assert_array_equal(limited.weights, [1.0, 0.25, 0.0, 0.0])
+    np.testing.assert_array_equal(limited.limits, [np.inf, np.inf, 0.45, 0.2])
+    np.testing.assert_array_equal(limited.baseline[2:], [0.4 + 0.3j, 0.1])
+    assert limited.measure([0j]).rms == pytest.approx(
+        math.sqrt(np.sum((w * abs(baseline)) ** 2) / 2), rel=1e-12)      # 2 weighted channels
+    assert limited.measure([-0.1 + 0j]).worst == pytest.approx(abs(0.3 + 0.3j) / 0.45)
+    twice = with_unbalance_limits(known, ['I'], [0.3 + 0.1j], [0.4])
+    np.testing.assert_array_equal(twice.limits, [0.5, 0.25, 0.4])
+    with pytest.raises(ValueError, match=r'^corrections in g, not kg m: no unbalance to limit$'):
+        with_unbalance_limits(problem, ['I'], [0.1], [0.2])
