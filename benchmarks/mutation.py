@@ -39,6 +39,7 @@ MODULES = {
     'engine': ('cvc_balance/physics/engine.py', PHYSICS),
     'layout': ('cvc_balance/physics/layout.py',
                ['test/test_layout.py', 'test/test_layout_messages.py',
+                'test/test_hostile_layouts.py', 'test/test_field_layout.py',
                 'test/test_edge_cases.py', 'test/test_unbalance.py']),
     'inertia': ('cvc_balance/physics/inertia.py', PHYSICS + ['test/test_stability.py']),
     'compensated': ('cvc_balance/physics/compensated.py',
