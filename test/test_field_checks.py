@@ -184,3 +184,37 @@ def test_the_balancing_problem_and_its_residual_by_hand():
     np.testing.assert_array_equal(twice.limits, [0.5, 0.25, 0.4])
     with pytest.raises(ValueError, match=r'^corrections in g, not kg m: no unbalance to limit$'):
         with_unbalance_limits(problem, ['I'], [0.1], [0.2])
+
+
+def test_a_trial_lost_in_the_noise_and_small_readings():
+    """
+    A trial whose change is under one standard error; readings under 1; one sigma only.
+
+    The change over the noise is 0.5: too small, and the advice is 20 / 0.5 = 40 times
+    heavier. Readings of 1e-3 (a vibration in mm/s) are compared with themselves, not with
+    1. With the baseline's standard errors but not the trials', the noise is not known.
+    """
+    trials = [trial('I', 200, 0), trial('II', 200, 90)]
+    u = [t.unbalance for t in trials]
+    small = ALPHA * 1e-6                          # readings of about 1e-3
+    base = BASELINE * 1e-5
+    first_run = base + small[:, 0] * u[0]
+    readings = [first_run, first_run + small[:, 1] * u[1]]      # trial I stays on
+    change = np.abs(small[:, 1] * u[1])
+    quiet = np.full(3, 1e-12)                     # the baseline and run 1: all but exact
+    sigmas = np.full(3, change.max() / 0.5)       # run 2: its largest change = 0.5 sigma
+    found = calibrate(base, trials, readings, None, True, quiet, [quiet, sigmas])
+    first = found.checks[0]                       # kept on: the first run against the baseline
+    assert first.relative == pytest.approx(
+        (np.abs(small[:, 0] * u[0]) / np.abs(base)).max(), rel=1e-12)
+    lost = found.checks[1]
+    assert lost.snr == pytest.approx(0.5, rel=1e-9) and (lost.too_small, lost.weak) == \
+        (True, False)
+    assert lost.relative == pytest.approx((change / np.abs(readings[0])).max(), rel=1e-12)
+    assert len(found.warnings) == 1 and found.warnings[0] == (
+        'trial run 2 (plane II, 0.2 at 90 deg): too small to see: the largest change is 0.5 '
+        'standard errors of the readings (under 5), within the noise; its plane\'s '
+        'coefficients and corrections are not to be trusted: use a trial weight about 40 '
+        'times heavier')
+    half = calibrate(base, trials, readings, None, True, quiet, None)
+    assert half.ci95 is None and half.checks[1].snr is None
