@@ -166,13 +166,17 @@ def test_the_balancing_problem_and_its_residual_by_hand():
     assert known.measure([0j, 0j]).within_limits is True          # 0.32 / 0.5, 0.2 / 0.25
     assert known.measure([0j, -0.1j]).worst == pytest.approx(0.3 / 0.25, rel=1e-14)
     assert known.measure([0j, -0.1j]).within_limits is False
+    assert known.measure([-0.8 - 0.1j, 0j]).within_limits is True     # |0.5| / 0.5: on it
     free = problem_from_unbalance(['I'], [0.3])
     np.testing.assert_array_equal(free.weights, [1.0])
     assert free.limits is None
+    assert free.measure([0.1]).rms == pytest.approx(0.4, rel=1e-15)   # one channel: /1
+    np.testing.assert_allclose(free.measure([0.1]).values, [0.4], rtol=1e-15)
     # Each plane's unbalance as a channel that only limits: weight 0, moved 1:1 by its plane.
     in_kg_m = BalancingProblem(('I',), ('a', 'b'), baseline, alpha, weights)
     limited = with_unbalance_limits(in_kg_m, ['I', 'II'], [0.4 + 0.3j, 0.1], [0.45, 0.2])
     assert limited.channels == ('a', 'b', 'plane I unbalance', 'plane II unbalance')
+    assert limited.planes == ('I',)
     np.testing.assert_array_equal(limited.influence[2:], [[1.0], [0.0]])
     np.testing.assert_array_equal(limited.weights, [1.0, 0.25, 0.0, 0.0])
     np.testing.assert_array_equal(limited.limits, [np.inf, np.inf, 0.45, 0.2])
