@@ -17,7 +17,8 @@ from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
 from cvc_balance.bag.replay import replay
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.messages import topics
-from cvc_balance.physics.assessment import ERROR, judge_balance, OK, WARN, WARN_FRACTION
+from cvc_balance.physics.assessment import (ERROR, judge_balance, OK, verdict_record, WARN,
+                                            WARN_FRACTION)
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.frames import degrees, g_mm
 from cvc_balance.physics.plausibility import layout_warnings
@@ -96,7 +97,10 @@ def segment_record(segment, identified=None):
     layout = segment.layout
     model = segment.model or RotorModel.from_layout(layout)     # aggregated once
     verdict = judge_balance(model, top_speed=segment.max_speed)
-    balance = verdict_summary(verdict)
+    balance = verdict_record(verdict)
+    if balance is not None:          # replay's record also says where the static unbalance is
+        balance['static_g_mm'] = g_mm(verdict.assessment.static_amount)
+        balance['static_angle_deg'] = degrees(verdict.assessment.static_angle)
     choice = segment.choice
     record = {
         'layout': {'name': layout.name, 'digest': layout.digest()},
@@ -119,38 +123,6 @@ def segment_record(segment, identified=None):
     if identified is not None:
         record['identified'] = identified_record(identified, balance)
     return record
-
-
-def verdict_summary(verdict):
-    """
-    Return a :class:`~cvc_balance.physics.assessment.Verdict` as ``solve --json``'s balance.
-
-    None when not judged. Planes: z, unbalance (g mm, deg), permissible share (g mm),
-    fraction of it, correction mass (kg) at its radius (m) and angle (deg).
-    """
-    assessment = verdict.assessment
-    if assessment is None:
-        return None
-    return {
-        'grade': assessment.grade, 'service_speed': assessment.omega,
-        'speed_source': verdict.speed_source,
-        'permissible_g_mm': g_mm(assessment.permissible),
-        'static_g_mm': g_mm(assessment.static_amount),
-        'static_angle_deg': degrees(assessment.static_angle),
-        'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees(p.angle),
-                    'permissible_g_mm': g_mm(allowed), 'fraction': fraction,
-                    'correction_mass_kg': p.correction_mass,
-                    'correction_radius': p.correction_radius,
-                    'correction_angle_deg': degrees(p.correction_angle)}
-                   for p, allowed, fraction in zip(assessment.planes,
-                                                   assessment.plane_permissible,
-                                                   assessment.fractions)],
-        'equivalent_grade': assessment.equivalent_grade,
-        'finest_grade_met': assessment.finest_grade_met,
-        'within_grade': assessment.within_grade,
-        'level': verdict.level,
-        'verdict': verdict.words,
-    }
 
 
 def _vector(vector, unit_scale, unit):

@@ -8,7 +8,7 @@ import math
 import sys
 
 from cvc_balance.cli.arguments import finite, print_json, tolerance
-from cvc_balance.physics.assessment import judge_balance
+from cvc_balance.physics.assessment import judge_balance, verdict_record
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees, g_mm, g_mm2, radians, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout_file import load_layout
@@ -102,28 +102,8 @@ def solve_summary(model, result, verdict, omega, alpha, q, gravity):
                              'angle_deg': degrees(math.atan2(static[1], static[0]))},
         'couple_unbalance': {'kg_m2': math.hypot(*couple),
                              'angle_deg': degrees(math.atan2(couple[1], couple[0]))},
-        'balance': None,
+        'balance': verdict_record(verdict),
     }
-    assessment = verdict.assessment
-    if assessment is not None:
-        summary['balance'] = {
-            'grade': assessment.grade, 'service_speed': assessment.omega,
-            'speed_source': verdict.speed_source,
-            'permissible_g_mm': g_mm(assessment.permissible),
-            'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees(p.angle),
-                        'permissible_g_mm': g_mm(allowed), 'fraction': fraction,
-                        'correction_mass_kg': p.correction_mass,
-                        'correction_radius': p.correction_radius,
-                        'correction_angle_deg': degrees(p.correction_angle)}
-                       for p, allowed, fraction in zip(assessment.planes,
-                                                       assessment.plane_permissible,
-                                                       assessment.fractions)],
-            'equivalent_grade': assessment.equivalent_grade,
-            'finest_grade_met': assessment.finest_grade_met,
-            'within_grade': assessment.within_grade,
-            'level': verdict.level,
-            'verdict': verdict.words,
-        }
     return summary
 
 

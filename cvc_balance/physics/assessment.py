@@ -20,7 +20,7 @@ speed to judge at.
 from dataclasses import dataclass
 
 from cvc_balance.physics import iso21940
-from cvc_balance.physics.frames import polar
+from cvc_balance.physics.frames import degrees, g_mm, polar
 from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 WARN_FRACTION = 0.8
@@ -174,3 +174,33 @@ def judge_balance(model, top_speed=0.0, grade=None, warn_fraction=WARN_FRACTION)
     else:
         level = OK
     return Verdict(level, grade, assessment, source, warn_fraction)
+
+
+def verdict_record(verdict):
+    """
+    Return ``verdict`` as JSON-able data: ``solve --json``'s and ``replay --json``'s balance.
+
+    None when not judged. Planes: z, unbalance (g mm, deg), permissible share (g mm),
+    fraction of it, correction mass (kg) at its radius (m) and angle (deg).
+    """
+    assessment = verdict.assessment
+    if assessment is None:
+        return None
+    return {
+        'grade': assessment.grade, 'service_speed': assessment.omega,
+        'speed_source': verdict.speed_source,
+        'permissible_g_mm': g_mm(assessment.permissible),
+        'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees(p.angle),
+                    'permissible_g_mm': g_mm(allowed), 'fraction': fraction,
+                    'correction_mass_kg': p.correction_mass,
+                    'correction_radius': p.correction_radius,
+                    'correction_angle_deg': degrees(p.correction_angle)}
+                   for p, allowed, fraction in zip(assessment.planes,
+                                                   assessment.plane_permissible,
+                                                   assessment.fractions)],
+        'equivalent_grade': assessment.equivalent_grade,
+        'finest_grade_met': assessment.finest_grade_met,
+        'within_grade': assessment.within_grade,
+        'level': verdict.level,
+        'verdict': verdict.words,
+    }
