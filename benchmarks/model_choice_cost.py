@@ -22,6 +22,7 @@ from cvc_balance.physics.model_choice import choose_model, Envelope, Tolerance
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 from reference import random_layout  # noqa: E402  (the tests' random layouts)
+from test_model_choice import gantry  # noqa: E402  (the tests' ten-component gantry)
 
 
 def best_time(call, repeat):
@@ -32,25 +33,6 @@ def best_time(call, repeat):
         call()
         best = min(best, time.perf_counter() - start)
     return best
-
-
-def gantry():
-    """Ten components in one plane, untilted: points, boxes and cylinders."""
-    rng = np.random.default_rng(21)
-    components = []
-    for i in range(10):
-        item = {'name': f'c{i}', 'mass': float(rng.uniform(5, 60)),
-                'radius': float(rng.uniform(0.2, 0.7)),
-                'angle': float(rng.uniform(0, 2 * math.pi))}
-        if i % 3 == 1:
-            item['shape'] = {'type': 'box', 'size': [0.3, 0.2, 0.25]}
-        elif i % 3 == 2:
-            item['shape'] = {'type': 'cylinder', 'radius': 0.1, 'length': 0.4,
-                             'axis': 'tangential'}
-        components.append(item)
-    return parse_layout({'name': 'gantry', 'components': components,
-                         'supports': [{'name': 'front', 'z': -0.4},
-                                      {'name': 'rear', 'z': 0.4, 'axial': True}]})
 
 
 def main():

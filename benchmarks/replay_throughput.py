@@ -82,38 +82,11 @@ def write_with_mcap_library(messages, path):
 
 def write_split_directory(messages, path, parts=3):
     """Write the run split in ``parts`` MCAP files of one rosbag2 directory (rosbags' Writer)."""
-    import shutil
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import get_typestore, Stores
-    store = get_typestore(Stores.ROS2_JAZZY)
-    path.mkdir()
-    infos, size = [], -(-len(messages) // parts)
-    for i in range(parts):
-        part = path.parent / f'{path.name}_part{i}'
-        with Writer(part, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            connections = {}
-            for log_time, topic, msg_type, data in messages[i * size:(i + 1) * size]:
-                if topic not in connections:
-                    connections[topic] = writer.add_connection(topic, msg_type, typestore=store)
-                writer.write(connections[topic], log_time, data)
-        info = yaml.safe_load((part / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-        name = f'{path.name}_{i}.mcap'
-        shutil.move(part / info['relative_file_paths'][0], path / name)
-        shutil.rmtree(part)
-        info['files'][0]['path'] = name
-        infos.append(info)
-    merged = dict(infos[0], relative_file_paths=[i['files'][0]['path'] for i in infos],
-                  files=[i['files'][0] for i in infos],
-                  message_count=sum(i['message_count'] for i in infos))
-    counts = {}
-    for info in infos:
-        for topic in info['topics_with_message_count']:
-            entry = counts.setdefault(topic['topic_metadata']['name'],
-                                      {'topic_metadata': topic['topic_metadata'],
-                                       'message_count': 0})
-            entry['message_count'] += topic['message_count']
-    merged['topics_with_message_count'] = list(counts.values())
-    (path / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': merged}))
+    import sys
+    from types import SimpleNamespace
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
+    from test_foreign_bags import write_split      # the tests' split directory, as rosbag2's
+    write_split(path, SimpleNamespace(events=messages), parts)
     return path
 
 
