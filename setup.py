@@ -17,7 +17,7 @@ setup(
         ('share/' + PACKAGE + '/bags', glob('bags/*.mcap') + glob('bags/*.yaml')),
     ],
     python_requires='>=3.11',
-    install_requires=['setuptools', 'numpy', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'PyYAML', 'msgspec'],
     extras_require={'test': ['pytest']},
     zip_safe=True,
     maintainer='cvc_balance developers',

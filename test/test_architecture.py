@@ -34,7 +34,7 @@ LAYERS = {
 
 THIRD_PARTY = {
     # What each layer may import beyond the standard library and the package itself.
-    'physics': {'numpy', 'yaml'},
+    'physics': {'numpy', 'yaml', 'msgspec'},
     'files': set(),
     'identify': {'numpy'},
     'field': {'numpy', 'scipy'},

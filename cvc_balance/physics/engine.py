@@ -68,9 +68,8 @@ class RotorModel:
         ``own_tensors``: the components' own tensors, (n, 3, 3), when already
         computed (:func:`own_tensors_of`).
         """
-        comps = layout.components
         if own_inertia and own_tensors is None:
-            own_tensors = own_tensors_of(comps)
+            own_tensors = layout_own_tensors(layout)
         mass, radius, angle, z = layout.placement
         body = place(mass, own_tensors if own_inertia else None, radius, angle, z)
         s_x, s_y, s_z = (float(v) for v in body.first_moment)
@@ -88,6 +87,20 @@ class RotorModel:
 def own_tensors_of(components):
     """Return the components' own inertia tensors, (n, 3, 3) (kg m^2)."""
     return tensors_from_elements([own_elements(c) for c in components])
+
+
+def layout_own_tensors(layout):
+    """
+    Return a layout's own inertia tensors, (n, 3, 3) (kg m^2), or None: all point masses.
+
+    Made from its bodies only (:attr:`Layout.bodies`): 10^6 point masses need none.
+    """
+    if not layout.bodies:
+        return None
+    tensors = np.zeros((len(layout.components), 3, 3))
+    indices, bodies = zip(*layout.bodies)
+    tensors[list(indices)] = own_tensors_of(bodies)
+    return tensors
 
 
 def own_inertia(component):

@@ -49,7 +49,7 @@ def layout_warnings(layout):
     # Checked as arrays, then described one by one: a layout may have 10^6 components.
     suspects = (np.abs(angle) > 2.0 * math.pi) | (np.abs(radius) >= LONGEST) \
         | (np.abs(z) >= LONGEST)
-    shaped = [k for k, c in enumerate(components) if c.shape is not None]
+    shaped = [k for k, c in layout.bodies if c.shape is not None]
     for k in sorted(set(np.flatnonzero(suspects).tolist()) | set(shaped)):
         c = components[k]
         where = f"component '{c.name}'"
@@ -62,7 +62,9 @@ def layout_warnings(layout):
                 warnings.append(f'{where}: field {field} {value:g} m is {LONGEST:g} m or more: '
                                 'millimetres for metres? (lengths are in m)')
         warnings += _density(c, where)
-    warnings += _mass_outliers([c for c in components if _volume(c.shape) is None])
+    points = np.ones(len(components), dtype=bool)          # no volume: point masses
+    points[[k for k, c in layout.bodies if _volume(c.shape) is not None]] = False
+    warnings += _mass_outliers(mass[points], np.flatnonzero(points), components)
     for s in layout.supports:
         if abs(s.z) >= LONGEST:
             warnings.append(f"support '{s.name}': field z {s.z:g} m is {LONGEST:g} m or more: "
@@ -126,11 +128,14 @@ def _volume(shape):
     return 4.0 / 3.0 * math.pi * shape.radius ** 3
 
 
-def _mass_outliers(components):
-    """Warnings for point masses above MASS_RATIO times the median of the others'."""
-    if len(components) <= MASS_PEERS:
+def _mass_outliers(masses, indices, components):
+    """
+    Warnings for point masses above MASS_RATIO times the median of the others'.
+
+    ``masses`` (kg) of the point masses, components[``indices``] (arrays).
+    """
+    if len(masses) <= MASS_PEERS:
         return []
-    masses = np.array([c.mass for c in components])
     ordered = np.sort(masses)
     last = len(ordered) - 1
     where = np.searchsorted(ordered, masses)       # a copy of each component's own mass
@@ -142,7 +147,7 @@ def _mass_outliers(components):
     median = of_others(middle) if last % 2 else 0.5 * (of_others(middle - 1) + of_others(middle))
     warnings = []
     for k in np.flatnonzero(masses > MASS_RATIO * median).tolist():
-        c, m = components[k], float(median[k])
+        c, m = components[int(indices[k])], float(median[k])
         warnings.append(f"component '{c.name}': mass {c.mass:g} kg is "
                         f'{c.mass / m:.0f} times the median of the others '
                         f'({m:g} kg): grams for kilograms? (masses are in kg)')
