@@ -40,10 +40,12 @@ class _PointMassJSON(msgspec.Struct, gc=False):
 
 class ComponentTable(Sequence):
     """
-    Components as columns: ``names``, ``placement`` (mass kg, R m, theta rad, z m: four
-    read-only (n,) arrays, as :attr:`Layout.placement`), and ``bodies``, {index:
-    Component} of the components with a shape or an inertia (their placement is in the
-    columns too). Validated by whoever makes it (:mod:`~cvc_balance.physics.layout_file`).
+    Components as columns, a read-only sequence of Components.
+
+    ``names``; ``placement`` (mass kg, R m, theta rad, z m: four read-only (n,) arrays, as
+    :attr:`Layout.placement`); ``bodies``, {index: Component} of the components with a
+    shape or an inertia (their placement is in the columns too). Validated by whoever
+    makes it (:mod:`~cvc_balance.physics.layout_file`).
     """
 
     __slots__ = ('names', 'placement', 'bodies')

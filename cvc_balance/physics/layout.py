@@ -210,7 +210,7 @@ class Layout:
                        for part in self._canonical_parts())
 
     def _canonical_parts(self):
-        """The canonical JSON in parts (str, or bytes for a ComponentTable's components)."""
+        """Yield the canonical JSON in parts (str; bytes for a ComponentTable's components)."""
         def dumps(value):
             return json.dumps(value, sort_keys=True, separators=(',', ':'))
         balancing = asdict(self.balancing)
@@ -277,7 +277,8 @@ def parse_layout(data):
     _mapping(data, 'layout')
     _known_keys(data, ('name', 'description', 'components', 'supports', 'gravity',
                        'balancing'), 'layout')
-    name = _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
+    # The name first (its error before any component's); kept by layout_with_components.
+    _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
     components = _list(_required(data, 'components', 'layout'), 'layout: field components')
     if not components:
         raise LayoutError('layout: field components: needs at least one component')
@@ -292,8 +293,10 @@ def parse_layout(data):
 
 def layout_with_components(data, components):
     """
-    Validate the rest of a layout mapping around its validated ``components`` (a tuple
-    of Components or a ComponentTable): name, supports, gravity, balancing, description.
+    Validate the rest of a layout mapping around its validated ``components``.
+
+    ``components``: a tuple of Components or a ComponentTable. The rest: name, supports,
+    gravity, balancing, description.
 
     ``data``'s own ``components`` field is not read. Raises :class:`LayoutError`.
     """

@@ -170,7 +170,7 @@ _HEADER_FIELDS = ('name', 'supports', 'description', 'gravity', 'balancing')
 
 
 def _read_columns(text):
-    """
+    r"""
     Read a JSON layout into columns (a ComponentTable) at speed, or return None.
 
     None whenever anything is not plainly well: then the careful reader reads the text
@@ -181,7 +181,7 @@ def _read_columns(text):
     msgspec keeps the last of a key given twice where the careful reader refuses it: a
     JSON text's colons are its keys' plus those inside its strings, so a text with more
     colons than the decoded keys and strings hold had a key twice (unless a colon was
-    written as the escape \\u003a: then this declines).
+    written as the escape \u003a: then this declines).
     """
     if not text[:64].lstrip().startswith('{') or '\\' in text and (
             '\\u003a' in text or '\\u003A' in text):
@@ -214,8 +214,8 @@ def _read_columns(text):
             keys += len(given)
             colons += sum(map(_colons, given.values()))
             fields = {f: getattr(item, f) for f in ('name', 'mass', 'radius', 'angle', 'z')}
-            fields = {f: v for f, v in fields.items() if not (isinstance(v, float)
-                                                             and math.isnan(v))}
+            fields = {f: v for f, v in fields.items()
+                      if not (isinstance(v, float) and math.isnan(v))}
             try:
                 component = _component({**fields, **given}, k)
             except LayoutError:
