@@ -1,7 +1,7 @@
 """
 The physics: layouts, their aggregates, the loads, the unbalance and its verdict.
 
-numpy (and PyYAML for layout files) only: nothing here knows of ROS, bags or viewers.
+numpy (and PyYAML and msgspec to read layouts) only: nothing here knows of ROS, bags or viewers.
 Lowest layer of the package; every other part builds on it. Public API:
 
 * layouts: :class:`Layout`, :func:`parse_layout`, :func:`load_layout`,
