@@ -136,9 +136,14 @@ def _mass_outliers(masses, indices, components):
     """
     if len(masses) <= MASS_PEERS:
         return []
-    ordered = np.sort(masses)
+    order = np.argsort(masses, kind='stable')
+    ordered = masses[order]
     last = len(ordered) - 1
-    where = np.searchsorted(ordered, masses)       # a copy of each component's own mass
+    # Where each mass sits in the sorted ones: (the place of) a copy of its own mass.
+    # Any copy will do (taking out one of equal masses leaves the same others), so the
+    # inverse of the sort, not a search (0.27 s for 10^6 in random order).
+    where = np.empty(len(masses), dtype=np.intp)
+    where[order] = np.arange(len(masses))
 
     def of_others(j):
         """Element j of the sorted masses without the component's own (one copy)."""
