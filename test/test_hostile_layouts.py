@@ -19,6 +19,7 @@ from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import LayoutError, MAX_ANGLE, parse_layout
 from cvc_balance.physics.layout_file import layout_from_text
+from fuzzing import fuzz_examples
 
 BASE = '''name: hostile
 components:
@@ -195,7 +196,8 @@ layouts = st.fixed_dictionaries(
     optional={'gravity': values, 'balancing': values})
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=fuzz_examples(400), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(layouts)
 def test_fuzzed_structures_give_a_layout_or_a_layout_error(data):
     try:
@@ -208,7 +210,7 @@ def test_fuzzed_structures_give_a_layout_or_a_layout_error(data):
                                           model.p_yz, model.i_zz))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=fuzz_examples(300), deadline=None)
 @given(st.text(max_size=200) | st.binary(max_size=200).map(lambda b: b.decode('latin-1')))
 def test_fuzzed_texts_give_a_layout_or_a_layout_error(text):
     try:

@@ -279,9 +279,35 @@ def test_bad_readings_are_dropped_and_counted():
     assert not live.reading('front', 0.001, (math.nan, 2.0))
     assert not live.reading('middle', 0.001, (1.0, 2.0))       # no such support
     assert not live.reading('front', 5.0, (1.0, 2.0))          # far from the motion
-    assert live.dropped == 4
+    assert not live.reading('front', 0.001, (1.0, 1.0001e12))  # beyond MAX_READING
+    assert not live.reading('front', 0.001, (1.0, -math.inf))
+    assert live.dropped == 6
     assert live.sums() == before
     assert live.reading('front', 0.001, (1.0, 2.0))
+    assert live.reading('front', 0.002, (1.0, 1e12))           # at the bound: taken
+
+
+def test_readings_that_overflow_the_sums_cannot_tell_and_say_so():
+    # Found by test_fuzz: readings of 1e308 N are finite, their squares are not; the fit
+    # then published NaN. Now: not identifiable, every interval inf, nothing NaN.
+    live = SlidingFit(DECLARED.supports, DECLARED.gravity[2], window_revs=1000)
+    motion, cells, _ = run(GANTRY, np.random.default_rng(3),
+                           cell_times=np.arange(0.0, 8.0, 1.0 / 500.0))
+    for k in range(len(motion.time)):
+        live.motion(motion.time[k], motion.angle[k], motion.omega[k], motion.alpha[k])
+        for name, cell in cells.items():
+            live.reading(name, cell.time[k], cell.force[k][:2])
+    assert live.estimate().identifiable
+    live._current.add(0, 1.0, 1.0, complex(1e308, 1e308))    # past the reading's check
+    estimate = live.estimate()
+    assert not estimate.identifiable and estimate.sigma == math.inf
+    assert estimate.static == 0j and estimate.products == 0j
+    huge = {name: CellReadings(name, cell.time,
+                               np.where(np.arange(len(cell.time))[:, None] == 7, 1e13,
+                                        cell.force), cell.torque)
+            for name, cell in cells.items()}
+    batch, dropped = fit(DECLARED, motion, huge)
+    assert dropped == 2 and batch.identifiable           # reading 7 of each cell dropped
 
 
 def test_channels_of_one_and_two_supports():

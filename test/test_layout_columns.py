@@ -28,6 +28,7 @@ from cvc_balance.physics.inertia import place
 from cvc_balance.physics.layout import LayoutError, parse_layout
 from cvc_balance.physics.layout_file import layout_from_text
 from cvc_balance.physics.plausibility import layout_warnings
+from fuzzing import fuzz_examples
 
 SUPPORTS = [{'name': 'front', 'z': -0.4}, {'name': 'rear', 'z': 0.4, 'axial': True}]
 
@@ -190,7 +191,8 @@ def layouts(draw):
                 escape_colons=draw(st.booleans()))
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=fuzz_examples(400), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(layouts())
 def test_columns_and_the_careful_reader_agree_on_any_json(text):
     assert_same_outcome(text)

@@ -55,12 +55,17 @@ def channels(supports):
     return [(k, 'force') for k in range(len(supports))]
 
 
+MAX_READING = 1e12
+"""Largest |force| (N) or |moment| (N m) component a cell reading may have: no bearing
+carries 10^12 N, and the fit's sums of squares of such readings stay finite."""
+
+
 def add_readings(sums, supports, g_z, motion, cells):
     """
     Add every cell reading inside the motion's span to ``sums``; return how many were dropped.
 
     ``cells``: {support name: CellReadings}; readings of unknown supports, outside the
-    motion's span or not finite are dropped.
+    motion's span, not finite or beyond :data:`MAX_READING` are dropped.
     """
     names = [s.name for s in supports]
     dropped = 0
@@ -70,7 +75,8 @@ def add_readings(sums, supports, g_z, motion, cells):
             continue
         force, torque = np.asarray(cell.force, float), np.asarray(cell.torque, float)
         inside = (cell.time >= motion.time[0]) & (cell.time <= motion.time[-1]) \
-            & np.all(np.isfinite(force), axis=1) & np.all(np.isfinite(torque), axis=1)
+            & np.all(np.abs(force) <= MAX_READING, axis=1) \
+            & np.all(np.abs(torque) <= MAX_READING, axis=1)        # NaN: False
         if kind == 'force':
             dropped += int((~inside).sum())
         if not inside.any():

@@ -122,6 +122,12 @@ class Estimate:
     identifiable: bool
 
     @classmethod
+    def unknown(cls, channels, readings):
+        """Return the estimate of readings that cannot tell: every interval inf."""
+        return cls(0j, 0j, tuple(0j for _ in range(channels)), math.inf,
+                   np.full((2, 2), math.inf), readings, False)
+
+    @classmethod
     def from_sums(cls, sums):
         """Solve the normal equations in ``sums``."""
         k = sums.channels
@@ -143,12 +149,13 @@ class Estimate:
             scaled = matrix / np.outer(scale, scale)     # equilibrated: the design's condition
             condition = np.linalg.cond(scaled)
         if dof <= 0 or not condition <= MAX_CONDITION:
-            return cls(0j, 0j, tuple(0j for _ in range(k)), math.inf,
-                       np.full((2, 2), math.inf), sums.readings, False)
+            return cls.unknown(k, sums.readings)
         inverse = np.linalg.inv(scaled) / np.outer(scale, scale)
         theta = inverse @ rhs
         rss = max(sums.yy - float(np.real(np.vdot(theta, rhs))), 0.0)
         sigma = math.sqrt(rss / dof)
+        if not (np.all(np.isfinite(theta)) and math.isfinite(sigma)):    # sums overflowed
+            return cls.unknown(k, sums.readings)
         biases = [0j] * k
         for j, c in enumerate(used, start=2):
             biases[c] = complex(theta[j])

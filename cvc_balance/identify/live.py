@@ -13,7 +13,7 @@ drift from subtracting).
 from collections import deque
 import math
 
-from cvc_balance.identify.batch import channels
+from cvc_balance.identify.batch import channels, MAX_READING
 from cvc_balance.identify.fit import Sums
 from cvc_balance.identify.regressors import moment_coefficients, support_coefficients, turning
 
@@ -71,12 +71,13 @@ class SlidingFit:
 
         ``moment`` (x, y) N m is used for a single support (its tilting moment).
         Returns False (and counts it dropped) when it cannot be used: unknown support,
-        not finite, no motion yet, or too far in time from the latest motion sample.
+        not finite or beyond :data:`~cvc_balance.identify.batch.MAX_READING`, no motion
+        yet, or too far in time from the latest motion sample.
         """
         index = self._index.get(support)
         state = self._motion
-        if index is None or state is None or not all(map(math.isfinite, force)) or (
-                moment is not None and not all(map(math.isfinite, moment))):
+        if index is None or state is None or not all(
+                abs(v) <= MAX_READING for v in (*force, *(moment or ()))):
             self.dropped += 1
             return False
         last_time, angle, omega, alpha = state

@@ -507,9 +507,8 @@ class BalanceMonitor(Node):
         level, message, values = diagnosis
         if level != self._reported_measured:    # a change of what the cells say: once
             self._reported_measured = level
-            logger = self.get_logger()
-            log = {assessment.ERROR: logger.error, assessment.WARN: logger.warning}
-            log.get(level, logger.info)(f'load cells {level}: {message}')
+            self._log_at({assessment.ERROR: 'error', assessment.WARN: 'warning'}.get(
+                level, 'info'), f'load cells {level}: {message}')
         status = DiagnosticStatus(name='balance_monitor: measured unbalance',
                                   hardware_id=self.get_fully_qualified_name(),
                                   level=LEVELS[level], message=message)
@@ -521,11 +520,23 @@ class BalanceMonitor(Node):
         if level == self._reported_level:
             return
         self._reported_level = level
+        self._log_at('error' if level == DiagnosticStatus.ERROR else 'warning' if level in (
+            DiagnosticStatus.WARN, DiagnosticStatus.STALE) else 'info',
+            f'balance {LEVEL_NAMES.get(level, level)}: {message}')
+
+    def _log_at(self, severity, text):
+        """
+        Log ``text`` at ``severity`` ('error', 'warning' or 'info').
+
+        One call line per severity: rclpy's logger raises ValueError when one line of
+        code logs at two severities ("Logger severity cannot be changed between calls"),
+        which once cost the diagnostics of the period in which the load cells' verdict
+        went from WARN to ERROR (found by test_fuzz).
+        """
         logger = self.get_logger()
-        text = f'balance {LEVEL_NAMES.get(level, level)}: {message}'
-        if level == DiagnosticStatus.ERROR:
+        if severity == 'error':
             logger.error(text)
-        elif level in (DiagnosticStatus.WARN, DiagnosticStatus.STALE):
+        elif severity == 'warning':
             logger.warning(text)
         else:
             logger.info(text)
