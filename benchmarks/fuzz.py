@@ -36,8 +36,9 @@ def main():
                          capture_output=True, text=True)
     lines = run.stdout.splitlines()
     for line in lines:
-        if line.startswith('{(') or 'passed' in line or 'failed' in line \
-                or line.startswith(('FAILED', 'E ')):
+        if "{('" in line:                  # test_fuzz's outcomes, after pytest's dots
+            print('inputs taken and refused:', line[line.index("{('"):])
+        elif 'passed' in line or 'failed' in line or line.startswith(('FAILED', 'E ')):
             print(line)
     print(f'{args.examples} examples per test, {time.monotonic() - started:.0f} s, '
           f'exit code {run.returncode}')

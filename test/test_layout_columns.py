@@ -297,6 +297,18 @@ def test_the_canonical_json_writes_every_float_as_repr(value):
         assert isinstance(layout.components, ComponentTable)
         assert layout.canonical_json() == canonical_by_asdict(layout)
         assert repr(getattr(layout.components[11], field)) in layout.canonical_json()
+    # And in a body's own numbers: a box's size, a tensor's elements.
+    size = abs(value)
+    if 0.0 < size <= 1e12:
+        items = points(30, rng)
+        items[4]['shape'] = {'type': 'box', 'size': [size, 0.2, 0.3]}
+        items[9]['inertia'] = {'ixx': size, 'iyy': size, 'izz': size, 'ixy': 0.0,
+                               'ixz': 0.0, 'iyz': 0.0}
+        layout = layout_from_text(dump({'name': 'repr', 'components': items,
+                                        'supports': SUPPORTS}))
+        assert isinstance(layout.components, ComponentTable) and len(layout.bodies) == 2
+        assert layout.canonical_json() == canonical_by_asdict(layout)
+        assert f'[{size!r},0.2,0.3]' in layout.canonical_json()
 
 
 def test_the_edges_of_msgspecs_float_formatting_are_where_we_say():

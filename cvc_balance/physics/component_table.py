@@ -44,8 +44,8 @@ class ComponentTable(Sequence):
 
     ``names``; ``placement`` (mass kg, R m, theta rad, z m: four read-only (n,) arrays, as
     :attr:`Layout.placement`); ``bodies``, {index: Component} of the components with a
-    shape or an inertia (their placement is in the columns too). Validated by whoever
-    makes it (:mod:`~cvc_balance.physics.layout_file`).
+    shape or an inertia, in index order (their placement is in the columns too).
+    Validated by whoever makes it (:mod:`~cvc_balance.physics.layout_file`).
     """
 
     __slots__ = ('names', 'placement', 'bodies')
@@ -56,7 +56,7 @@ class ComponentTable(Sequence):
         self.placement = tuple(np.asarray(v, dtype=float) for v in placement)
         for column in self.placement:
             column.flags.writeable = False
-        self.bodies = bodies
+        self.bodies = dict(sorted(bodies.items()))
 
     def __len__(self):
         """Return the number of components."""
@@ -109,9 +109,10 @@ class ComponentTable(Sequence):
         """
         Return the components' canonical JSON, UTF-8 (as :meth:`Layout.canonical_json`).
 
-        The point masses are written by msgspec where that is certain to give the same
-        text as json.dumps: names of printable ASCII without quotes or backslashes, numbers
-        in :data:`REPR_RANGE`. Other rows, and bodies, are written as the tuple's are.
+        Written by msgspec (keys sorted; a body as its dataclasses, which msgspec writes
+        field by field) where that is certain to give the same text as json.dumps: names
+        of printable ASCII without quotes or backslashes, numbers in :data:`REPR_RANGE`.
+        Other rows are written as the tuple's are.
         """
         joined = ''.join(self.names)
         if not (joined.isascii() and joined.isprintable() and '"' not in joined
@@ -125,6 +126,23 @@ class ComponentTable(Sequence):
         mass, radius, angle, z = (column.tolist() for column in self.placement)
         items = list(map(_PointMassJSON, angle, repeat(None), mass, self.names, radius,
                          repeat(None), z))
-        for k in set(np.flatnonzero(other).tolist()) | set(self.bodies):
+        for k, body in self.bodies.items():
+            items[k] = body if _repr_safe(_numbers(body)) else \
+                msgspec.Raw(component_json(body).encode())
+        for k in np.flatnonzero(other).tolist():
             items[k] = msgspec.Raw(component_json(self[k]).encode())
-        return msgspec.json.encode(items)
+        return msgspec.json.encode(items, order='sorted')
+
+
+def _numbers(body):
+    """Return the numbers of a body's own inertia: its shape's lengths or its tensor."""
+    if body.inertia is not None:
+        return body.inertia
+    shape = body.shape
+    return (shape.radius, shape.length, shape.inner_radius, shape.outer_radius, *shape.size)
+
+
+def _repr_safe(values):
+    """Tell whether msgspec writes each of ``values`` as repr does (:data:`REPR_RANGE`)."""
+    low, high = REPR_RANGE
+    return all(v == 0.0 or low <= abs(v) < high for v in values)

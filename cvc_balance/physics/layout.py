@@ -181,7 +181,7 @@ class Layout:
         """(index, Component) of the components with a shape or an inertia, in order."""
         bodies = getattr(self.components, 'bodies', None)         # a ComponentTable's own
         if bodies is not None:
-            return tuple(sorted(bodies.items()))
+            return tuple(bodies.items())                             # kept in index order
         return tuple((k, c) for k, c in enumerate(self.components)
                      if c.shape is not None or c.inertia is not None)
 
@@ -390,22 +390,79 @@ def _component(item, index):
     mass = _number(_required(item, 'mass', where), f'{where}: field mass', minimum=0.0,
                    strict=True)
     radius = _number(_required(item, 'radius', where), f'{where}: field radius', minimum=0.0)
+    angle = _angle(item, where)
+    z = _number(item.get('z', 0.0), f'{where}: field z')
+    return Component(name, mass, radius, angle, z, *_own_inertia(item, where))
+
+
+def body_component(name, mass, radius, angle, z, given):
+    """
+    Return a Component read as columns with the fields in ``given`` (parsed values).
+
+    For readers that check name, mass (kg), radius (m), angle (rad; NaN: not given) and
+    z (m) over whole columns (:func:`plain_columns`): ``given`` holds what the columns
+    do not, angle_deg, shape or inertia, validated here as for any component. Raises
+    :class:`LayoutError`.
+    """
+    where = f'component {short(name)}'
+    fields = dict(given) if math.isnan(angle) else {'angle': angle, **given}
+    component = object.__new__(Component)
+    component.__dict__.update(zip(
+        ('name', 'mass', 'radius', 'angle', 'z', 'shape', 'inertia'),
+        (name, mass, radius, _angle(fields, where), z, *_own_inertia(fields, where))))
+    return component
+
+
+def _angle(item, where):
+    """Return the angle (rad) of a component's mapping: its field angle, or angle_deg."""
     if ('angle' in item) == ('angle_deg' in item):
         raise LayoutError(f'{where}: give exactly one of fields angle (rad) and angle_deg')
     if 'angle' in item:
-        angle = _number(item['angle'], f'{where}: field angle', bound=MAX_ANGLE)
-    else:
-        angle = radians(_number(item['angle_deg'], f'{where}: field angle_deg',
-                                bound=math.degrees(MAX_ANGLE)))
-    z = _number(item.get('z', 0.0), f'{where}: field z')
+        return _number(item['angle'], f'{where}: field angle', bound=MAX_ANGLE)
+    return radians(_number(item['angle_deg'], f'{where}: field angle_deg',
+                           bound=math.degrees(MAX_ANGLE)))
+
+
+def _own_inertia(item, where):
+    """Return (shape, inertia) of a component's mapping, each None when not given."""
     if 'shape' in item and 'inertia' in item:
         raise LayoutError(f'{where}: give field shape or field inertia, not both')
     shape = _shape(item['shape'], where) if 'shape' in item else None
     inertia = _inertia(item['inertia'], where) if 'inertia' in item else None
-    return Component(name, mass, radius, angle, z, shape, inertia)
+    return shape, inertia
+
+
+def _plain_shape(spec):
+    """
+    Return the Shape ``spec`` describes when all is plainly well, else None.
+
+    As :func:`_plain_component` for the common case (10^5 shaped components), without a
+    message per field; anything unusual or wrong goes to :func:`_shape`, which names it.
+    """
+    kind = spec.get('type') if type(spec) is dict else None
+    fields = SHAPE_FIELDS.get(kind) if type(kind) is str else None
+    axis = spec.get('axis', 'axial') if fields is not None else None
+    if fields is None or len(spec) != 1 + len(fields) + ('axis' in spec) or (
+            'axis' in spec and kind not in AXIAL_SHAPES) or type(axis) is not str \
+            or axis not in AXES:
+        return None
+    values = {}
+    for key in fields:
+        value = spec.get(key)
+        numbers = value if key == 'size' and type(value) is list and len(value) == 3 \
+            else (value,)
+        if not all(type(v) in _FLOAT and 0.0 < v <= MAX_MAGNITUDE for v in numbers):
+            return None
+        values[key] = tuple(map(float, numbers)) if key == 'size' else float(value)
+    if kind == 'tube' and not values['inner_radius'] < values['outer_radius']:
+        return None
+    return Shape(kind, axis=axis, **values)
 
 
 def _shape(spec, where):
+    plain = _plain_shape(spec)
+    if plain is not None:
+        return plain
     _mapping(spec, f'{where}: field shape')
     kind = spec.get('type')
     if not isinstance(kind, str) or kind not in SHAPE_FIELDS:

@@ -49,7 +49,7 @@ def layout_warnings(layout):
     # Checked as arrays, then described one by one: a layout may have 10^6 components.
     suspects = (np.abs(angle) > 2.0 * math.pi) | (np.abs(radius) >= LONGEST) \
         | (np.abs(z) >= LONGEST)
-    shaped = [k for k, c in layout.bodies if c.shape is not None]
+    shaped = [k for k, c in layout.bodies if c.shape is not None and _suspect_shape(c)]
     for k in sorted(set(np.flatnonzero(suspects).tolist()) | set(shaped)):
         c = components[k]
         where = f"component '{c.name}'"
@@ -81,6 +81,16 @@ def layout_warnings(layout):
         warnings.append(f'layout: field gravity has magnitude {g:.6g} m/s^2, neither 0 nor '
                         f"Earth's ({STANDARD_GRAVITY} m/s^2): other units?")
     return tuple(warnings)
+
+
+def _suspect_shape(component):
+    """Tell whether a shaped component may warn: a shape length or its density."""
+    shape = component.shape
+    if max(shape.radius, shape.length, shape.outer_radius, *shape.size) >= LONGEST:
+        return True
+    volume = _volume(shape)
+    low, high = DENSITY_RANGE
+    return bool(volume) and not low <= component.mass / volume <= high
 
 
 def _lengths(component):

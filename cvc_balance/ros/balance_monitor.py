@@ -44,7 +44,8 @@ from cvc_balance.physics import assessment
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout import LayoutError, one_line
-from cvc_balance.physics.layout_file import layout_from_text, MAX_TEXT_BYTES
+from cvc_balance.physics.layout_file import (collector_paused, layout_from_text,
+                                             MAX_TEXT_BYTES)
 from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
                                         MAX_STAMP_JUMP, sample_problem, StampGate)
 from cvc_balance.physics.plausibility import layout_warnings
@@ -114,12 +115,13 @@ class PreparedLayout:
     def __init__(self, text, source):
         """Parse ``text`` (YAML/JSON) and aggregate it; raises LayoutError."""
         self.text, self.source = text, source
-        self.layout = layout_from_text(text, source=source)
-        self.model = RotorModel.from_layout(self.layout)
-        self.digest = self.layout.digest()
-        self.static = static_unbalance(self.model)
-        self.couple = couple_unbalance(self.model)
-        self.warnings = layout_warnings(self.layout)
+        with collector_paused():         # 10^6 components: objects made, none garbage
+            self.layout = layout_from_text(text, source=source)
+            self.model = RotorModel.from_layout(self.layout)
+            self.digest = self.layout.digest()
+            self.static = static_unbalance(self.model)
+            self.couple = couple_unbalance(self.model)
+            self.warnings = layout_warnings(self.layout)
 
 
 def prepare_layout(text, source):
