@@ -363,6 +363,26 @@ def test_a_table_is_a_sequence_of_components():
     assert table != tuple_[:-1] and table != list(tuple_)
 
 
+def test_two_tables_are_equal_only_when_every_part_is():
+    rng = np.random.default_rng(10)
+    items = points(8, rng)
+    items[3]['shape'] = {'type': 'sphere', 'radius': 0.1}
+
+    def table(change=None):
+        changed = [dict(item) for item in items]
+        if change:
+            change(changed)
+        return layout_from_text(dump({'name': 't', 'components': changed,
+                                      'supports': SUPPORTS})).components
+    same = table()
+    assert isinstance(same, ComponentTable) and same == table() and not same != table()
+    for change in (lambda c: c[5].update(name='renamed'),              # a name
+                   lambda c: c[6].update(z=c[6]['z'] + 1e-3),          # a column
+                   lambda c: c[3].update(shape={'type': 'sphere', 'radius': 0.2})):  # a body
+        other = table(change)
+        assert same != other and other != same and not same == other
+
+
 def test_point_masses_need_no_own_tensors():
     # A layout of point masses aggregates with no own tensors, to the same bits as with
     # zero tensors; a mixed one with zeros except at its bodies.
