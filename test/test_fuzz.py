@@ -294,14 +294,30 @@ def damaged(data, changes):
 
 
 def replayed_or_refused(path, tmp_path):
-    """Replay ``path`` in full: 'refused' (one-line BagError) or 'read' (finite figures)."""
+    """
+    Replay ``path`` in full: 'refused' (one-line BagError) or 'read'.
+
+    Read: the summary's figures finite, and every wrench of the output bag too (read by
+    the ``mcap`` library with CRCs checked, decoded by rosbags).
+    """
+    from mcap.reader import make_reader
+    from test_foreign_bags import STORE
+    output = tmp_path / 'out.mcap'
     try:
-        summary = replay(path, tmp_path / 'out.mcap', joint_name=JOINT)
+        summary = replay(path, output, joint_name=JOINT)
     except BagError as error:
         assert '\n' not in str(error) and len(str(error)) <= 2 * MAX_LINE
         return 'refused'
     for segment in summary.segments:
         assert math.isfinite(segment.peak_total)
+    with open(output, 'rb') as stream:
+        for schema, channel, message in make_reader(stream, validate_crcs=True) \
+                .iter_messages():
+            if schema.name == 'geometry_msgs/msg/WrenchStamped':
+                wrench = STORE.deserialize_cdr(message.data, schema.name).wrench
+                values = [wrench.force.x, wrench.force.y, wrench.force.z, wrench.torque.x,
+                          wrench.torque.y, wrench.torque.z]
+                assert all(map(math.isfinite, values)), (channel.topic, values)
     return 'read'
 
 
