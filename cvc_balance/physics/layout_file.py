@@ -228,11 +228,10 @@ def _read_columns(text):
     bodies = {}
     # Colons beyond the point masses' keys: fields of bodies, or a key given twice.
     if written != keys + colons:
+        none_given = (msgspec.UNSET,) * len(_BODY_FIELDS)
         unset = msgspec.UNSET
-        given_at = sorted({k for field in _BODY_FIELDS
-                           for k, value in enumerate(map(attrgetter(field), docs))
-                           if value is not unset})
-        for k in given_at:
+        for k in [k for k, fields in enumerate(map(attrgetter(*_BODY_FIELDS), docs))
+                  if fields != none_given]:           # a tuple compares items by identity first
             item = docs[k]
             given = {f: getattr(item, f) for f in _BODY_FIELDS
                      if getattr(item, f) is not unset}
@@ -267,8 +266,11 @@ def _colons(value):
             count += len(item) + sum(key.count(':') for key in item)   # JSON keys: str
             stack.extend(item.values())
         elif kind is list:
-            stack.extend(item)
+            stack.extend(v for v in item if type(v) not in _NUMBERS)
     return count
+
+
+_NUMBERS = (int, float)
 
 
 def _json_object(pairs):

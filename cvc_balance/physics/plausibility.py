@@ -49,7 +49,9 @@ def layout_warnings(layout):
     # Checked as arrays, then described one by one: a layout may have 10^6 components.
     suspects = (np.abs(angle) > 2.0 * math.pi) | (np.abs(radius) >= LONGEST) \
         | (np.abs(z) >= LONGEST)
-    shaped = [k for k, c in layout.bodies if c.shape is not None and _suspect_shape(c)]
+    volumes = [(k, c, _volume(c.shape)) for k, c in layout.bodies]    # None: no volume
+    shaped = [k for k, c, volume in volumes if c.shape is not None
+              and _suspect_shape(c, volume)]
     for k in sorted(set(np.flatnonzero(suspects).tolist()) | set(shaped)):
         c = components[k]
         where = f"component '{c.name}'"
@@ -63,7 +65,7 @@ def layout_warnings(layout):
                                 'millimetres for metres? (lengths are in m)')
         warnings += _density(c, where)
     points = np.ones(len(components), dtype=bool)          # no volume: point masses
-    points[[k for k, c in layout.bodies if _volume(c.shape) is not None]] = False
+    points[[k for k, _, volume in volumes if volume is not None]] = False
     warnings += _mass_outliers(mass[points], np.flatnonzero(points), components)
     for s in layout.supports:
         if abs(s.z) >= LONGEST:
@@ -83,12 +85,11 @@ def layout_warnings(layout):
     return tuple(warnings)
 
 
-def _suspect_shape(component):
-    """Tell whether a shaped component may warn: a shape length or its density."""
+def _suspect_shape(component, volume):
+    """Tell whether a shaped component (``volume`` m^3) may warn: a length or density."""
     shape = component.shape
     if max(shape.radius, shape.length, shape.outer_radius, *shape.size) >= LONGEST:
         return True
-    volume = _volume(shape)
     low, high = DENSITY_RANGE
     return bool(volume) and not low <= component.mass / volume <= high
 
