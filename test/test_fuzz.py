@@ -242,6 +242,27 @@ def test_the_load_cells_verdict_may_change_level_any_way(node):
     assert messages == [f'cells {level}' for level in levels]
 
 
+def test_every_kind_of_trouble_is_logged_without_raising(node):
+    # Found on review: the throttled log was one line of code for a rejected sample
+    # (WARN) and for an internal error (ERROR), so rclpy's logger raised ValueError on
+    # the second severity, out of the guard itself: the first bug after a bad sample
+    # would have ended the node.
+    def failing(msg):
+        raise KeyError('a bug the checks missed')
+    for _ in range(2):                       # each kind twice, in both orders
+        node._last_logged.clear()            # past the throttle: every call logs
+        node._reject('a bad sample')
+        node._guarded(failing)(None)
+        node.lost_message(RuntimeError('not convertible'))
+        node._last_logged.clear()
+        node.lost_message(RuntimeError('not convertible'))
+        node._guarded(failing)(None)
+        node._reject('a bad sample')
+    assert node._internal_errors == 8        # 4 bugs caught by the guard, 4 lost messages
+    assert node._last_rejection == 'a bad sample'
+    node._internal_errors = 0              # the other tests count from here
+
+
 # -- bags -------------------------------------------------------------------------------
 
 

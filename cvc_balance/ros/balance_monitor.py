@@ -236,7 +236,7 @@ class BalanceMonitor(Node):
         """Count a message rclpy could not hand over (the spin loop's ``on_error``)."""
         self._internal_errors += 1
         self._last_rejection = f'a message rclpy could not convert: {one_line(error, 200)}'
-        self._log_throttled('lost', self.get_logger().error, self._last_rejection)
+        self._log_throttled('lost', 'error', self._last_rejection)
 
     def _guarded(self, callback):
         """
@@ -252,8 +252,7 @@ class BalanceMonitor(Node):
                 self._internal_errors += 1
                 self._last_rejection = (f'internal error in {callback.__name__}: '
                                         f'{type(error).__name__}: {one_line(error, 200)}')
-                self._log_throttled('internal', self.get_logger().error,
-                                    self._last_rejection)
+                self._log_throttled('internal', 'error', self._last_rejection)
         return guarded
 
     def emit_rotor(self, topic, sec, nanosec, force, torque):
@@ -302,8 +301,7 @@ class BalanceMonitor(Node):
         active = self._active
         if active is None:
             self._counts['dropped'] += 1
-            self._log_throttled('dropped', self.get_logger().warning,
-                                'no layout yet: motion samples dropped')
+            self._log_throttled('dropped', 'warning', 'no layout yet: motion samples dropped')
             return
         time = sec + nanosec * 1e-9
         problem = sample_problem(time, None, angle, omega, self.params['max_speed']) or \
@@ -366,11 +364,11 @@ class BalanceMonitor(Node):
         self._counts['rejected'] += 1
         self._period_rejected += 1
         self._last_rejection = reason
-        self._log_throttled('rejected', self.get_logger().warning, f'rejected {reason}')
+        self._log_throttled('rejected', 'warning', f'rejected {reason}')
 
-    def _log_throttled(self, key, log, message):
+    def _log_throttled(self, key, severity, message):
         """
-        Log ``message`` with ``log`` at most once every THROTTLE_S seconds per ``key``.
+        Log ``message`` at ``severity`` at most once every THROTTLE_S seconds per ``key``.
 
         Not rclpy's ``throttle_duration_sec``: that walks the caller's frames on every call,
         logged or not, and under the events executor the node's native memory grew with it
@@ -379,7 +377,7 @@ class BalanceMonitor(Node):
         now = monotonic()
         if now - self._last_logged.get(key, -math.inf) >= THROTTLE_S:
             self._last_logged[key] = now
-            log(message)
+            self._log_at(severity, message)
 
     # -- layout ----------------------------------------------------------------------
 
@@ -530,10 +528,12 @@ class BalanceMonitor(Node):
         """
         Log ``text`` at ``severity`` ('error', 'warning' or 'info').
 
-        One call line per severity: rclpy's logger raises ValueError when one line of
-        code logs at two severities ("Logger severity cannot be changed between calls"),
-        which once cost the diagnostics of the period in which the load cells' verdict
-        went from WARN to ERROR (found by test_fuzz).
+        Every log call of varying severity goes through here, one call line per
+        severity: rclpy's logger raises ValueError when one line of code logs at two
+        severities ("Logger severity cannot be changed between calls"). That once cost
+        the diagnostics of the period in which the load cells' verdict went from WARN to
+        ERROR (found by test_fuzz), and made the guard itself raise on the first internal
+        error after a rejected sample (the throttled log was one line for both).
         """
         logger = self.get_logger()
         if severity == 'error':
