@@ -268,6 +268,9 @@ def component_json(c):
                        'inertia': c.inertia}, sort_keys=True, separators=(',', ':'))
 
 
+_LAYOUT_FIELDS = ('name', 'description', 'components', 'supports', 'gravity', 'balancing')
+
+
 def parse_layout(data):
     """
     Validate a mapping (parsed YAML/JSON) into a :class:`Layout`.
@@ -275,8 +278,7 @@ def parse_layout(data):
     Raises :class:`LayoutError` naming the first thing that is wrong.
     """
     _mapping(data, 'layout')
-    _known_keys(data, ('name', 'description', 'components', 'supports', 'gravity',
-                       'balancing'), 'layout')
+    _known_keys(data, _LAYOUT_FIELDS, 'layout')
     # The name first (its error before any component's); kept by layout_with_components.
     _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
     components = _list(_required(data, 'components', 'layout'), 'layout: field components')
@@ -301,8 +303,7 @@ def layout_with_components(data, components):
     ``data``'s own ``components`` field is not read. Raises :class:`LayoutError`.
     """
     _mapping(data, 'layout')
-    _known_keys(data, ('name', 'description', 'components', 'supports', 'gravity',
-                       'balancing'), 'layout')
+    _known_keys(data, _LAYOUT_FIELDS, 'layout')
     name = _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
     supports = _supports(_required(data, 'supports', 'layout'))
     gravity = DEFAULT_GRAVITY
@@ -370,13 +371,17 @@ def plain_columns(names, mass, radius, angle, z):
                 and len(set(names)) == n)
 
 
-def point_mass(name, mass, radius, angle, z):
-    """Return Component(name, mass, radius, angle, z) (floats, validated), made at speed."""
+def point_mass(name, mass, radius, angle, z, shape=None, inertia=None):
+    """
+    Return Component(name, mass, radius, angle, z, shape, inertia), made at speed.
+
+    For values already validated (a point mass unless ``shape`` or ``inertia``).
+    """
     # The frozen dataclass's __init__ sets each field through object.__setattr__ (1 us
     # of 3 per component); its fields set at once give the same value.
     component = object.__new__(Component)
     component.__dict__.update(name=name, mass=mass, radius=radius, angle=angle, z=z,
-                              shape=None, inertia=None)
+                              shape=shape, inertia=inertia)
     return component
 
 
@@ -406,11 +411,8 @@ def body_component(name, mass, radius, angle, z, given):
     """
     where = f'component {short(name)}'
     fields = dict(given) if math.isnan(angle) else {'angle': angle, **given}
-    component = object.__new__(Component)
-    component.__dict__.update(zip(
-        ('name', 'mass', 'radius', 'angle', 'z', 'shape', 'inertia'),
-        (name, mass, radius, _angle(fields, where), z, *_own_inertia(fields, where))))
-    return component
+    return point_mass(name, mass, radius, _angle(fields, where), z,
+                      *_own_inertia(fields, where))
 
 
 def _angle(item, where):
