@@ -662,7 +662,7 @@ def test_replay_drops_samples_before_a_layout_and_keeps_the_last_good_one(tmp_pa
     """
     import yaml
     from cvc_balance.bag.mcap_reader import Bag
-    from cvc_balance.bag.replay import format_summary
+    from cvc_balance.bag.run_summary import format_replay, replay_record
     stamps, angle, omega = ramp(-2.0, -3.0, rate=100.0, seconds=4.0)
     heavier = yaml.safe_load(yaml.safe_dump(LAYOUT))
     heavier['components'][2]['mass'] = 9.0
@@ -696,7 +696,7 @@ def test_replay_drops_samples_before_a_layout_and_keeps_the_last_good_one(tmp_pa
         assert segment.peak_total == pytest.approx(peaks['total'], rel=4e-15)
         for name, peak in segment.peak_support.items():
             assert peak == pytest.approx(peaks[name], rel=4e-15)
-    text = format_summary(summary)
+    text = format_replay(replay_record(summary))
     assert text.startswith(f'bag {bag}: 400 motion samples, 350 used, 0 rejected, 50 before '
                            'any layout')
     assert f"layout 'drum' ({parse_layout(heavier).digest()}) from" in text
@@ -989,7 +989,7 @@ def test_replay_summary_over_many_blocks_in_full(tmp_path):
     """
     import yaml
     from mcap.reader import make_reader as reader_of
-    from cvc_balance.bag.replay import format_summary
+    from cvc_balance.bag.run_summary import format_replay, replay_record
     stamps, angle, omega = ramp(30.0, -0.5, rate=1000.0, seconds=40.0)
     early = yaml.safe_load(yaml.safe_dump(LAYOUT))
     early['name'] = 'early'
@@ -1033,8 +1033,8 @@ def test_replay_summary_over_many_blocks_in_full(tmp_path):
     # ISO 21940-11: U_per = G m / Omega (G mm/s -> m/s), split by the shares, in g mm.
     permissible = [2.5e-3 * mass / 30.0 * share * 1e6 for share in shares]
     planes = [
-        f'  plane {label} (z {z:.3f} m): unbalance {abs(p) * 1e6:.1f} g mm at '
-        f'{math.degrees(np.angle(p)):.1f} deg = {abs(p) * 1e6 / limit:.2f} of its '
+        f'  layout plane {label} (z {z:.3f} m): unbalance {abs(p) * 1e6:.1f} g mm at '
+        f'{math.degrees(np.angle(p)) % 360.0:.1f} deg = {abs(p) * 1e6 / limit:.2f} of its '
         f'permissible {limit:.1f} g mm'
         for label, z, p, limit in (('I ', -0.2, plane_1, permissible[0]),
                                    ('II', 0.2, plane_2, permissible[1]))]
@@ -1044,20 +1044,22 @@ def test_replay_summary_over_many_blocks_in_full(tmp_path):
         f'bag {bag}: 40000 motion samples, 40000 used, 0 rejected, 0 before any layout',
         f"layout 'early' ({parse_layout(early).digest()}) from 5.000 s: 0 samples, "
         'top speed 0 rad/s',
-        '  peak load on the stator 0.0 N; per support: ',
         '  verdict NOT JUDGED: balance grade not judged: the layout names no service speed '
-        '(balancing.service_speed) and the rotor has not turned',
+        '(balancing.service_speed) and the rotor has not turned (from the layout: no load '
+        'cells)',
+        '  peak load on the stator 0.0 N; per support: ',
         f"layout 'drum' ({digest}) from 5.000 s: 40000 samples, top speed 30 rad/s",
+        f'  verdict {"OK" if grade <= 2.5 else "ERROR"}: G {grade:.3g} at the service '
+        f'speed 30 rad/s: {"WITHIN" if grade <= 2.5 else "OUT OF"} G 2.5 (from the layout: '
+        'no load cells)',
+        *planes,
         f"  peak load on the stator {peaks['total']:.1f} N; per support: front "
         f"{peaks['front']:.1f} N, rear {peaks['rear']:.1f} N",
-        *planes,
-        f'  verdict {"OK" if grade <= 2.5 else "ERROR"}: G {grade:.3g} at the service '
-        f'speed 30 rad/s: {"WITHIN" if grade <= 2.5 else "OUT OF"} G 2.5',
         '40000 samples in 0.250 s (0.160 M samples/s, read + compute + write); wrote '
         f'{tmp_path / "out.mcap"}'])
-    assert format_summary(summary) == expected
+    assert format_replay(replay_record(summary)) == expected
     summary.seconds, summary.output = 0.0, ''
-    assert format_summary(summary).splitlines()[-1] == \
+    assert format_replay(replay_record(summary)).splitlines()[-1] == \
         '40000 samples in 0.000 s (0.000 M samples/s, read + compute)'
 
 

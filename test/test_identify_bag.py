@@ -65,10 +65,22 @@ def test_identify_finds_what_the_layout_does_not_know():
 
 
 def test_identify_table_and_a_bag_without_cells():
+    """With cells: the verdict of record leads; without: exit 1, the bag's topics named."""
+    from mcap.reader import make_reader
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'identify', str(BAG)],
                          capture_output=True, text=True, check=True)
     assert 'residual' in run.stdout and 'static residual' in run.stdout
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'identify',
-                          str(ROOT / 'bags' / 'spin_up_tube_swap.mcap')], capture_output=True,
-                         text=True, check=True)
-    assert 'no load-cell readings' in run.stdout
+    lines = run.stdout.splitlines()
+    assert lines[1].startswith('segment 1: layout ')
+    assert lines[2].startswith('  verdict ') and lines[2].endswith('(measured by the load cells)')
+    without = ROOT / 'bags' / 'spin_up_tube_swap.mcap'
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'identify', str(without)],
+                         capture_output=True, text=True)
+    assert run.returncode == 1 and run.stdout == ''
+    (line,) = run.stderr.splitlines()
+    assert 'no load cells to identify from' in line
+    with open(without, 'rb') as stream:       # the topics as the mcap library reads them
+        summary = make_reader(stream).get_summary()
+    schemas = summary.schemas
+    for channel in summary.channels.values():
+        assert f'{channel.topic} ({schemas[channel.schema_id].name})' in line

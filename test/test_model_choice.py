@@ -143,14 +143,15 @@ def test_solve_says_which_model_it_took(tmp_path):
 def test_replay_takes_per_layout_the_smallest_model_within_the_tolerance():
     """The bundled tilted bag: every layout's model said; peaks within its deviation."""
     from pathlib import Path
-    from cvc_balance.bag.replay import format_summary, replay
+    from cvc_balance.bag.replay import replay
+    from cvc_balance.bag.run_summary import format_replay, replay_record
     bag = Path(__file__).resolve().parents[1] / 'bags' / 'tilted_shift.mcap'
     full = replay(bag)
     for tolerance, expected in ((Tolerance(1e9), 'point masses, planar'),
                                 (Tolerance(100.0), 'point masses'),
                                 (Tolerance(1.0, 1.0, 1.0), 'rigid bodies')):
         reduced = replay(bag, tolerance=tolerance)
-        text = format_summary(reduced)
+        text = format_replay(replay_record(reduced))
         for segment, reference in zip(reduced.segments, full.segments):
             assert segment.choice.name == expected
             assert f'model: {expected} (' in text

@@ -34,6 +34,7 @@ class IdentifiedSegment:
     readings: int
     dropped: int
     revolutions: float
+    top_speed: float        # rad/s, the top |omega| of the segment's accepted samples
     estimate: object
     identified: object
     declared: object
@@ -91,7 +92,8 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
         declared = layout_unbalance(model)
         segments.append(IdentifiedSegment(
             layout, int(max(start_ns, 0)), int(min(end_ns, log_time[hi - 1])), int(hi - lo),
-            int(estimate.readings), int(dropped), seg.revolutions(), estimate, identified,
+            int(estimate.readings), int(dropped), seg.revolutions(),
+            float(np.abs(omega[part]).max()), estimate, identified,
             declared, residual(identified, declared)))
         if observer is not None and estimate.identifiable:
             _observe(observer, model, seg, cells, estimate, segments[-1])

@@ -7,7 +7,6 @@ the same outputs and frames. No ROS graph is needed.
 """
 
 from dataclasses import dataclass, field
-import math
 import time
 
 import numpy as np
@@ -18,14 +17,12 @@ from cvc_balance.bag.mcap_reader import (BagError, float64_samples, joint_sample
 from cvc_balance.bag.rosbag2 import open_bag, open_writer
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
-from cvc_balance.physics.assessment import judge_balance
 from cvc_balance.physics.engine import loads, RotorModel
-from cvc_balance.physics.frames import g_mm, ROTOR_FRAME, STATOR_FRAME, wrap_angle
+from cvc_balance.physics.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
 from cvc_balance.physics.layout import LayoutError
 from cvc_balance.physics.layout_file import layout_from_text
 from cvc_balance.physics.model_choice import choose_model, Envelope
 from cvc_balance.physics.motion import accepted_motion, MAX_STAMP_JUMP
-from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 
 JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
@@ -299,44 +296,3 @@ def _account(segment, model, result, omega):
         peak = float(np.linalg.norm(result.support_force[s.name], axis=1).max()) \
             if len(omega) else 0.0
         segment.peak_support[s.name] = max(segment.peak_support.get(s.name, 0.0), peak)
-
-
-def format_summary(summary):
-    """Describe a replay for people (SI; degrees and g mm where people read them)."""
-    lines = [f'bag {summary.bag}: {summary.samples} motion samples, {summary.accepted} used, '
-             f'{summary.rejected} rejected, {summary.dropped} before any layout'
-             + (f', {summary.skipped} skipped' if summary.skipped else '')]
-    lines += [f'  rejected: {r}' for r in summary.reasons]
-    lines += [f'  skipped: {summary.skipped_reason}'] if summary.skipped else []
-    lines += [f'  problem: {p}' for p in summary.problems]
-    for segment in summary.segments:
-        layout = segment.layout
-        model = RotorModel.from_layout(layout)
-        lines.append(f"layout '{layout.name}' ({layout.digest()}) from "
-                     f'{max(segment.start_ns, 0) * 1e-9:.3f} s: {segment.samples} samples, '
-                     f'top speed {segment.max_speed:.4g} rad/s')
-        lines.append(f'  peak load on the stator {segment.peak_total:.1f} N; per support: '
-                     + ', '.join(f'{name} {peak:.1f} N'
-                                 for name, peak in segment.peak_support.items()))
-        lines += [f'  warning: {warning}' for warning in layout_warnings(layout)]
-        verdict = judge_balance(model, top_speed=segment.max_speed)
-        a = verdict.assessment
-        if a is not None:
-            for label, p, allowed, fraction in zip(('I', 'II'), a.planes, a.plane_permissible,
-                                                   a.fractions):
-                lines.append(f'  plane {label:2} (z {p.z:.3f} m): unbalance {g_mm(p.amount):.1f} '
-                             f'g mm at {math.degrees(p.angle):.1f} deg = {fraction:.2f} of its '
-                             f'permissible {g_mm(allowed):.1f} g mm')
-            if not a.planes:
-                lines.append(f'  static unbalance {g_mm(a.static_amount):.1f} g mm = '
-                             f'{a.fractions[0]:.2f} of the permissible {g_mm(a.permissible):.1f}'
-                             ' g mm')
-        lines.append(f'  verdict {verdict.level}: {verdict.text}')
-        if segment.choice is not None:
-            lines.append(f'  {segment.choice.describe()}')
-    rate = summary.accepted / summary.seconds if summary.seconds else 0.0
-    lines.append(f'{summary.accepted} samples in {summary.seconds:.3f} s '
-                 f'({rate / 1e6:.3f} M samples/s, read + compute'
-                 f'{" + write" if summary.output else ""})'
-                 + (f'; wrote {summary.output}' if summary.output else ''))
-    return '\n'.join(lines)

@@ -16,11 +16,11 @@ from cvc_balance.bag.identify_run import identify_bag
 from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
 from cvc_balance.bag.replay import replay
 from cvc_balance.bag.rosbag2 import open_bag
+from cvc_balance.identify.evidence import verdict_of_record
 from cvc_balance.messages import topics
-from cvc_balance.physics.assessment import (ERROR, judge_balance, OK, verdict_record, WARN,
-                                            WARN_FRACTION)
+from cvc_balance.physics.assessment import verdict_record
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.frames import degrees, g_mm
+from cvc_balance.physics.frames import degrees_360, g_mm
 from cvc_balance.physics.plausibility import layout_warnings
 
 SCHEMA = 'cvc_balance replay'
@@ -87,20 +87,28 @@ def replay_record(summary, identified=None, machine_id=None):
         'rejected_reasons': list(summary.reasons)
         + ([summary.skipped_reason] if summary.skipped else []),
         'problems': list(summary.problems),
-        'seconds': summary.seconds,
+        'seconds': summary.seconds, 'output': summary.output or None,
         'segments': segments,
     }
 
 
 def segment_record(segment, identified=None):
-    """Return one layout segment of a replay as JSON-able data (see :func:`replay_record`)."""
+    """
+    Return one layout segment of a replay as JSON-able data (see :func:`replay_record`).
+
+    ``verdict`` is the verdict of record (:mod:`cvc_balance.identify.evidence`): the
+    measured rotor's when the segment's load cells can tell, else the layout's, labelled;
+    ``balance`` the layout's assessment in detail (what the layout expects).
+    """
     layout = segment.layout
     model = segment.model or RotorModel.from_layout(layout)     # aggregated once
-    verdict = judge_balance(model, top_speed=segment.max_speed)
+    of_record = verdict_of_record(model, None if identified is None else identified.estimate,
+                                  top_speed=segment.max_speed)
+    verdict = of_record.layout
     balance = verdict_record(verdict)
     if balance is not None:          # replay's record also says where the static unbalance is
         balance['static_g_mm'] = g_mm(verdict.assessment.static_amount)
-        balance['static_angle_deg'] = degrees(verdict.assessment.static_angle)
+        balance['static_angle_deg'] = degrees_360(verdict.assessment.static_angle)
     choice = segment.choice
     record = {
         'layout': {'name': layout.name, 'digest': layout.digest()},
@@ -113,69 +121,138 @@ def segment_record(segment, identified=None):
         'peak_load_N': segment.peak_total,
         'peak_support_load_N': dict(segment.peak_support),
         'warnings': list(layout_warnings(layout)),
+        'verdict': of_record.record(),
         'balance': balance,
         'model': choice.name if choice is not None else 'rigid bodies',
+        'model_choice': choice.describe() if choice is not None else None,
         'model_deviation': None if choice is None else {
             'force_N': choice.deviation.force, 'moment_Nm': choice.deviation.moment,
             'torque_Nm': choice.deviation.torque},
         'identified': None,
     }
     if identified is not None:
-        record['identified'] = identified_record(identified, balance)
+        record['identified'] = identified_record(identified, of_record)
     return record
 
 
-def _vector(vector, unit_scale, unit):
+def _vector(vector, unit_scale, unit, known=True):
+    """A vector's amount, angle (deg, 0..360) and 95 % radius; null for what is not known."""
+    if not known:
+        return {unit: None, 'angle_deg': None, f'ci95_{unit}': None}
     ci = vector.ci95 * unit_scale if math.isfinite(vector.ci95) else None
-    return {unit: vector.amount * unit_scale, 'angle_deg': degrees(vector.angle),
+    return {unit: vector.amount * unit_scale, 'angle_deg': degrees_360(vector.angle),
             f'ci95_{unit}': ci}
 
 
-def unbalance_summary(unbalance):
-    """Return a RotorUnbalance as JSON-able data: kg m, kg m^2, g mm; degrees."""
-    return {'static_unbalance': _vector(unbalance.static, 1.0, 'kg_m'),
-            'couple_unbalance': _vector(unbalance.couple, 1.0, 'kg_m2'),
-            'planes': [{'z': z, **_vector(v, 1e6, 'g_mm')} for z, v in unbalance.planes]}
+def unbalance_summary(unbalance, known=True):
+    """
+    Return a RotorUnbalance as JSON-able data: kg m, kg m^2, g mm; degrees.
+
+    ``known`` False (the readings could not tell): every amount, angle and radius null,
+    never 0, which would read as perfectly balanced.
+    """
+    return {'static_unbalance': _vector(unbalance.static, 1.0, 'kg_m', known),
+            'couple_unbalance': _vector(unbalance.couple, 1.0, 'kg_m2', known),
+            'planes': [{'z': z, **_vector(v, 1e6, 'g_mm', known)} for z, v in unbalance.planes]}
 
 
 def identified_summary(segment):
     """Return an IdentifiedSegment as JSON-able data (``identify --json``'s segment)."""
     estimate = segment.estimate
+    known = estimate.identifiable
     return {
         'layout': {'name': segment.layout.name, 'digest': segment.layout.digest()},
         'from': segment.start_ns * 1e-9, 'to': segment.end_ns * 1e-9,
         'samples': segment.samples, 'readings': segment.readings, 'dropped': segment.dropped,
-        'revolutions': segment.revolutions, 'identifiable': estimate.identifiable,
-        'identified': unbalance_summary(segment.identified),
+        'revolutions': segment.revolutions, 'identifiable': known,
+        'identified': unbalance_summary(segment.identified, known),
         'layout_prediction': unbalance_summary(segment.declared),
-        'residual': unbalance_summary(segment.residual),
-        'fit': {'rms_N': estimate.sigma * math.sqrt(2) if estimate.identifiable else None,
-                'sigma_N': estimate.sigma if estimate.identifiable else None,
-                'biases_N': [[b.real, b.imag] for b in estimate.biases]},
+        'residual': unbalance_summary(segment.residual, known),
+        'fit': {'rms_N': estimate.sigma * math.sqrt(2) if known else None,
+                'sigma_N': estimate.sigma if known else None,
+                'biases_N': [[b.real, b.imag] for b in estimate.biases] if known else None},
     }
 
 
-def identified_record(segment, balance):
+def identified_record(segment, of_record):
     """
-    Return ``identify``'s segment record plus the identified unbalance against the grade.
+    Return ``identify``'s segment record plus the measured rotor against the grade.
 
-    ``grade``: each plane's identified unbalance over the permissible share the layout's
-    verdict gives it (``balance``), the equivalent grade (G times the larger fraction: the
-    standard's own rule, as :class:`~cvc_balance.physics.assessment.BalanceAssessment`) and
-    its level; None when not identifiable or not judged.
+    ``grade``: each plane's identified unbalance over its permissible share, the
+    equivalent grade and its level, from the measured rotor's verdict of ``of_record``
+    (the one definition, :func:`cvc_balance.physics.assessment.judge_balance`); None when
+    not identifiable or not judged.
     """
     record = identified_summary(segment)
     record.pop('layout')
+    measured = of_record.measured
     record['grade'] = None
-    planes = record['identified']['planes']
-    if (balance is None or not record['identifiable'] or not planes
-            or len(planes) != len(balance['planes'])):
+    if measured is None or measured.assessment is None:
         return record
-    fractions = [p['g_mm'] / allowed['permissible_g_mm']
-                 for p, allowed in zip(planes, balance['planes'])]
-    equivalent = balance['grade'] * max(fractions)
-    level = ERROR if equivalent > balance['grade'] else \
-        WARN if equivalent > WARN_FRACTION * balance['grade'] else OK
-    record['grade'] = {'fractions': fractions, 'equivalent_grade': equivalent,
-                       'within_grade': equivalent <= balance['grade'], 'level': level}
+    judged = measured.assessment
+    record['grade'] = {'fractions': list(judged.fractions),
+                       'equivalent_grade': judged.equivalent_grade,
+                       'within_grade': judged.within_grade, 'level': measured.level}
     return record
+
+
+def format_replay(record):
+    """
+    Describe a replay record (:func:`replay_record`) for people: ``replay``'s text.
+
+    Per layout segment the verdict of record comes first, with its source; what the
+    layout expects and how the rotor differs from it follow; then the measured and the
+    layout's planes, the peak loads and the layout's warnings. Rendered from the record,
+    so the text and ``replay --json`` cannot say different things.
+    """
+    lines = [f"bag {record['bag']}: {record['samples']} motion samples, {record['accepted']} "
+             f"used, {record['rejected']} rejected, {record['dropped']} before any layout"
+             + (f", {record['skipped']} skipped" if record['skipped'] else '')]
+    lines += [f'  rejected: {r}' for r in record['rejected_reasons']]
+    lines += [f'  problem: {p}' for p in record['problems']]
+    for segment in record['segments']:
+        lines += _segment_lines(segment)
+    rate = record['accepted'] / record['seconds'] if record['seconds'] else 0.0
+    output = record['output']
+    lines.append(f"{record['accepted']} samples in {record['seconds']:.3f} s "
+                 f'({rate / 1e6:.3f} M samples/s, read + compute{" + write" if output else ""})'
+                 + (f'; wrote {output}' if output else ''))
+    return '\n'.join(lines)
+
+
+def _segment_lines(segment):
+    layout, verdict = segment['layout'], segment['verdict']
+    start = segment['from'] if segment['from'] is not None else 0.0
+    lines = [f"layout '{layout['name']}' ({layout['digest']}) from {start:.3f} s: "
+             f"{segment['samples']} samples, top speed {segment['top_speed']:.4g} rad/s",
+             f"  verdict {verdict['headline']}"]
+    if verdict['source'] == 'measured':
+        lines.append(f"  {verdict['layout_expects']}")
+    if verdict['disagreement']:
+        lines.append(f"  {verdict['disagreement']}")
+    identified = segment['identified']
+    if identified is not None and identified['identifiable']:
+        fractions = (identified['grade'] or {}).get('fractions') or [None, None]
+        for label, p, fraction in zip(('I', 'II'), identified['identified']['planes'],
+                                      fractions):
+            share = '' if fraction is None else f' = {fraction:.2f} of its permissible'
+            lines.append(f"  measured plane {label:2} (z {p['z']:.3f} m): {p['g_mm']:.1f} g mm at "
+                         f"{p['angle_deg']:.1f} deg +- {p['ci95_g_mm']:.1f} g mm (95 %){share}")
+    balance = segment['balance']
+    if balance is not None:
+        for label, p in zip(('I', 'II'), balance['planes']):
+            lines.append(f"  layout plane {label:2} (z {p['z']:.3f} m): unbalance {p['g_mm']:.1f} "
+                         f"g mm at {p['angle_deg']:.1f} deg = {p['fraction']:.2f} of its "
+                         f"permissible {p['permissible_g_mm']:.1f} g mm")
+        if not balance['planes']:
+            lines.append(f"  layout static unbalance {balance['static_g_mm']:.1f} g mm = "
+                         f"{balance['static_g_mm'] / balance['permissible_g_mm']:.2f} of the "
+                         f"permissible {balance['permissible_g_mm']:.1f} g mm")
+    peaks = ', '.join(f'{name} {peak:.1f} N'
+                      for name, peak in segment['peak_support_load_N'].items())
+    lines.append(f"  peak load on the stator {segment['peak_load_N']:.1f} N; per support: "
+                 + peaks)
+    lines += [f'  warning: {warning}' for warning in segment['warnings']]
+    if segment['model_deviation'] is not None:
+        lines.append(f"  {segment['model_choice']}")
+    return lines

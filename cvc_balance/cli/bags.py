@@ -120,7 +120,7 @@ def _simulate(args):
 
 
 def _replay(args):
-    from cvc_balance.bag.replay import format_summary, replay
+    from cvc_balance.bag.replay import replay
     show = args.progress if args.progress is not None else sys.stderr.isatty()
     with staged_outputs([args.bag, args.layout_file], bags=('bag',), bag=args.output,
                         rrd=args.rrd) as out:
@@ -135,18 +135,19 @@ def _replay(args):
             _log_cells(args, logger)
             logger.finish()
     summary.output = args.output or ''
+    from cvc_balance.bag.identify_run import identify_bag
+    from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
+    from cvc_balance.bag.run_summary import format_replay, has_load_cells, replay_record
+    # The verdict of record needs the cells' fit: the text leads with it as the JSON does.
+    identified = identify_bag(args.bag, args.layout_file, args.joint_name,
+                              time_constant=args.alpha_time_constant,
+                              max_speed=args.max_speed, names=input_topics(args))[0] \
+        if has_load_cells(args.bag) else None
+    record = replay_record(summary, identified, bag_custom_data(args.bag).get(MACHINE_ID))
     if args.json:
-        from cvc_balance.bag.identify_run import identify_bag
-        from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
-        from cvc_balance.bag.run_summary import has_load_cells, replay_record
-        identified = identify_bag(args.bag, args.layout_file, args.joint_name,
-                                  time_constant=args.alpha_time_constant,
-                                  max_speed=args.max_speed, names=input_topics(args))[0] \
-            if has_load_cells(args.bag) else None
-        print_json(replay_record(summary, identified,
-                                 bag_custom_data(args.bag).get(MACHINE_ID)))
-        return 0
-    print(format_summary(summary))
+        print_json(record)
+    else:
+        print(format_replay(record))
     return 0
 
 

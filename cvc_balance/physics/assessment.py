@@ -20,7 +20,7 @@ speed to judge at.
 from dataclasses import dataclass
 
 from cvc_balance.physics import iso21940
-from cvc_balance.physics.frames import degrees, g_mm, polar
+from cvc_balance.physics.frames import degrees_360, g_mm, polar
 from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 WARN_FRACTION = 0.8
@@ -190,11 +190,11 @@ def verdict_record(verdict):
         'grade': assessment.grade, 'service_speed': assessment.omega,
         'speed_source': verdict.speed_source,
         'permissible_g_mm': g_mm(assessment.permissible),
-        'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees(p.angle),
+        'planes': [{'z': p.z, 'g_mm': g_mm(p.amount), 'angle_deg': degrees_360(p.angle),
                     'permissible_g_mm': g_mm(allowed), 'fraction': fraction,
                     'correction_mass_kg': p.correction_mass,
                     'correction_radius': p.correction_radius,
-                    'correction_angle_deg': degrees(p.correction_angle)}
+                    'correction_angle_deg': degrees_360(p.correction_angle)}
                    for p, allowed, fraction in zip(assessment.planes,
                                                    assessment.plane_permissible,
                                                    assessment.fractions)],

@@ -146,6 +146,17 @@ def degrees(angle):
     return math.degrees(angle)
 
 
+def degrees_360(angle):
+    """
+    Radians to degrees in [0, 360), for people: every angle a person reads (text, JSON).
+
+    One range everywhere, as a protractor and a gantry's hole count read them; -0.0 and
+    values that round to 360 read as 0.
+    """
+    value = math.degrees(angle) % 360.0
+    return 0.0 if value >= 360.0 or value == 0.0 else value
+
+
 def radians(angle_deg):
     """Degrees to radians, for people's input (layout files, command line)."""
     return math.radians(angle_deg)
