@@ -8,7 +8,7 @@ segment (:mod:`cvc_balance.identify`): the identified unbalance, the layout's, t
 residual (what the layout does not know), their 95 % radii and the fit's rms.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -18,6 +18,7 @@ from cvc_balance.bag.replay import layout_events, read_inputs
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.identify import (CellReadings, fit, identified_unbalance, layout_unbalance,
                                   Motion, residual)
+from cvc_balance.identify.evidence import verdict_of_record
 from cvc_balance.messages import topics
 from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.motion import accepted_motion
@@ -39,6 +40,9 @@ class IdentifiedSegment:
     identified: object
     declared: object
     residual: object
+    model: object = field(default=None, repr=False)     # the layout's RotorModel
+    motion: object = field(default=None, repr=False)    # the fitted Motion and cells, kept
+    cells: dict = field(default=None, repr=False)       # for :func:`observe`
 
 
 def cell_readings(bag, supports):
@@ -61,9 +65,8 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
     ``bag_path``: a bag file or rosbag2 directory; ``names`` its input topics if not the
     node's (:class:`cvc_balance.bag.inputs.InputTopics`); ``window_revs``: fit only the
     last that many revolutions of each segment (the state at its end, as the live node
-    reports it); default the whole segment. ``observer`` (a rerun RunLogger, which must
-    have seen the replay of the same bag) gets each segment's cells beside the layout's
-    prediction (``cells``) and what the fit found (``measured``).
+    reports it); default the whole segment. ``observer``: see :func:`observe` (or call it
+    later with the segments returned).
     """
     bag = open_bag(bag_path)
     motion, layout_messages = read_inputs(bag, joint_name, names)
@@ -94,14 +97,24 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
             layout, int(max(start_ns, 0)), int(min(end_ns, log_time[hi - 1])), int(hi - lo),
             int(estimate.readings), int(dropped), seg.revolutions(),
             float(np.abs(omega[part]).max()), estimate, identified,
-            declared, residual(identified, declared)))
-        if observer is not None and estimate.identifiable:
-            _observe(observer, model, seg, cells, estimate, segments[-1])
+            declared, residual(identified, declared), model, seg, cells))
+        if observer is not None:
+            observe(observer, segments[-1])
     return segments, bag.problems + problems
 
 
-def _observe(observer, model, motion, cells, estimate, segment):
-    """Hand the observer each cell (less its fitted zero) beside the layout's prediction."""
+def observe(observer, segment):
+    """
+    Hand ``observer`` (a rerun RunLogger) a segment's cells and what the fit found.
+
+    Each cell, less its fitted zero, beside the layout's prediction (``cells``), then the
+    residual, the identified unbalance and the segment's verdict of record (``measured``).
+    The observer must have seen the replay of the same bag. Nothing when not identifiable.
+    """
+    estimate, model, motion, cells = segment.estimate, segment.model, segment.motion, \
+        segment.cells
+    if not estimate.identifiable:
+        return
     names = [s.name for s in model.supports]
     for name, cell in cells.items():
         if not len(cell.time):
@@ -115,7 +128,14 @@ def _observe(observer, model, motion, cells, estimate, segment):
         observer.cells(name, np.round(cell.time * 1e9).astype(np.int64),
                        cell.force[:, 0] - zero, predicted[:, 0])
     # Drawn from the segment's start: the fit holds for the whole of it.
-    observer.measured(int(round(motion.time[0] * 1e9)), segment.residual, segment.identified)
+    observer.measured(int(round(motion.time[0] * 1e9)), segment.residual, segment.identified,
+                      segment_verdict(segment))
+
+
+def segment_verdict(segment, grade=None):
+    """Return the segment's :class:`~cvc_balance.identify.evidence.VerdictOfRecord`."""
+    return verdict_of_record(segment.model, segment.estimate, top_speed=segment.top_speed,
+                             grade=grade)
 
 
 def _during(cell, start, end):

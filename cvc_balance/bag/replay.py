@@ -138,8 +138,9 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     (:class:`cvc_balance.bag.inputs.InputTopics`) the input topics if not the
     node's own.
 
-    ``observer`` (e.g. a rerun RunLogger) gets ``layout(start_ns, model)`` for each
-    layout and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
+    ``observer`` (e.g. a rerun RunLogger) gets ``layout(first stamp ns, model,
+    segment_start_ns=log time it came into force, 0 if before the bag)`` for each layout
+    and ``samples(stamp_ns, angle, omega, alpha, result)`` for each block.
     ``tolerance`` (a :class:`cvc_balance.physics.model_choice.Tolerance`): each layout is
     computed with the smallest model within it over the speeds and accelerations of
     its own samples, and the segment says which.
@@ -197,7 +198,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         if observer is not None:
             first = np.searchsorted(log_time, start_ns)
             observer.layout(int(stamp[first]) if first < len(stamp) else max(int(start_ns), 0),
-                            model)
+                            model, segment_start_ns=int(max(start_ns, 0)))
         for a in range(lo, hi, BLOCK):
             b = min(a + BLOCK, hi)
             result = loads(model, angle[a:b], omega[a:b], alpha[a:b])

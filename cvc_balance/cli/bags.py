@@ -120,11 +120,17 @@ def _simulate(args):
 
 
 def _replay(args):
+    from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
     from cvc_balance.bag.replay import replay
+    from cvc_balance.bag.run_summary import format_replay, replay_record
     show = args.progress if args.progress is not None else sys.stderr.isatty()
     with staged_outputs([args.bag, args.layout_file], bags=('bag',), bag=args.output,
                         rrd=args.rrd) as out:
-        logger = _rerun_logger(out['rrd'], args.bag) if args.rrd else None
+        # The verdict of record needs the cells' fit first: the text, the JSON and the
+        # view all lead with it.
+        identified = _identified(args)
+        logger = _rerun_logger(out['rrd'], args.bag, identified=identified) \
+            if args.rrd else None
         summary = replay(args.bag, out['bag'], args.layout_file, args.joint_name,
                          args.alpha_time_constant, args.max_speed,
                          '' if args.compression == 'none' else args.compression,
@@ -132,23 +138,27 @@ def _replay(args):
                          tolerance=Tolerance(*args.tolerance) if args.tolerance else None,
                          names=input_topics(args), max_stamp_jump=args.max_stamp_jump)
         if logger:
-            _log_cells(args, logger)
+            _log_cells(logger, identified)
             logger.finish()
     summary.output = args.output or ''
-    from cvc_balance.bag.identify_run import identify_bag
-    from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
-    from cvc_balance.bag.run_summary import format_replay, has_load_cells, replay_record
-    # The verdict of record needs the cells' fit: the text leads with it as the JSON does.
-    identified = identify_bag(args.bag, args.layout_file, args.joint_name,
-                              time_constant=args.alpha_time_constant,
-                              max_speed=args.max_speed, names=input_topics(args))[0] \
-        if has_load_cells(args.bag) else None
     record = replay_record(summary, identified, bag_custom_data(args.bag).get(MACHINE_ID))
     if args.json:
         print_json(record)
     else:
         print(format_replay(record))
     return 0
+
+
+def _identified(args):
+    """The bag's identified segments ([IdentifiedSegment]), None without load cells."""
+    from cvc_balance.bag.identify_run import identify_bag
+    from cvc_balance.bag.run_summary import has_load_cells
+    if not has_load_cells(args.bag):
+        return None
+    return identify_bag(args.bag, getattr(args, 'layout_file', None), args.joint_name,
+                        time_constant=getattr(args, 'alpha_time_constant', 0.1),
+                        max_speed=getattr(args, 'max_speed', 1000.0),
+                        names=input_topics(args))[0]
 
 
 class ReplayProgress:
@@ -169,25 +179,29 @@ class ReplayProgress:
             self._bar.close()
 
 
-def _log_cells(args, logger):
+def _log_cells(logger, identified):
     """Add a bag's load cells (if it has any) to its rerun view: measured and residual."""
-    from cvc_balance.bag.identify_run import identify_bag
-    identify_bag(args.bag, getattr(args, 'layout_file', None), args.joint_name,
-                 names=input_topics(args), observer=logger)
+    from cvc_balance.bag.identify_run import observe
+    for segment in identified or ():
+        observe(logger, segment)
 
 
-def _rerun_logger(path, bag, every=10):
+def _rerun_logger(path, bag, every=10, identified=None):
+    """A RunLogger saving to ``path``, told each segment's verdict of record beforehand."""
+    from cvc_balance.bag.identify_run import segment_verdict
     from cvc_balance.view.rerun_log import open_recording, RunLogger
-    return RunLogger(open_recording('save', path, name=bag), every)
+    evidence = {(s.layout.digest(), s.start_ns): segment_verdict(s) for s in identified or ()}
+    return RunLogger(open_recording('save', path, name=bag), every, evidence=evidence)
 
 
 def _view(args):
     from cvc_balance.bag.replay import replay
     with staged_outputs([args.bag], rrd=args.output, png=args.screenshot) as out:
-        logger = _rerun_logger(out['rrd'], args.bag, args.every)
+        identified = _identified(args)
+        logger = _rerun_logger(out['rrd'], args.bag, args.every, identified)
         summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
                          names=input_topics(args))
-        _log_cells(args, logger)
+        _log_cells(logger, identified)
         logger.finish()
         print(f'{args.output}: {summary.accepted} samples of {args.bag}, '
               f'{len(summary.segments)} layouts')

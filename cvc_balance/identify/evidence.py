@@ -135,16 +135,21 @@ class VerdictOfRecord:
         return text + (f'; {self.explanation}' if self.explanation else '')
 
     @property
+    def statement(self):
+        """The verdict and its source, e.g. 'G 9.17 at ... OUT OF G 6.3 (measured by ...)'."""
+        return f'{self.verdict.text} ({self.source_text})'
+
+    @property
     def headline(self):
         """The headline, e.g. 'ERROR: G 9.17 at ... OUT OF G 6.3 (measured by the load cells)'."""
-        return f'{self.level}: {self.verdict.text} ({self.source_text})'
+        return f'{self.level}: {self.statement}'
 
     @property
     def text(self):
-        """The headline and, when rotor and layout disagree, how (one line)."""
+        """The statement and, when rotor and layout disagree, how (one line, no level)."""
         if self.disagreements:
-            return f'{self.headline}; {self.disagreement_text}'
-        return self.headline
+            return f'{self.statement}; {self.disagreement_text}'
+        return self.statement
 
     @property
     def layout_text(self):

@@ -14,12 +14,13 @@ Publications (geometry_msgs/WrenchStamped, stamp = input sample's stamp):
 ``bearing_load`` and ``supports/<name>/load`` (stator frame, N and N m),
 ``unbalance`` (rotor frame: force = U omega^2, torque = couple moment),
 ``drive_torque`` (rotor frame, torque.z). ``/diagnostics`` every period and at
-each layout change: the ISO 21940-11 verdict (one definition,
-:func:`cvc_balance.physics.assessment.judge_balance`: at the layout's service
-speed, or the top speed seen), the layout's plausibility warnings, the node's
-counts; STALE when no motion sample came for ``stale_after`` seconds. Changes
-of that level are logged once each (WARN and STALE as warnings, ERROR as an
-error, back to OK as info).
+each layout change: the verdict of record first (one definition,
+:func:`cvc_balance.identify.evidence.verdict_of_record`: the ISO 21940-11 verdict of the
+rotor the load cells measure once they can tell, else the layout's, labelled; a rotor
+that is not what its layout says is a WARN at least), what the layout expects, the
+layout's plausibility warnings, the node's counts; STALE when no motion sample came for
+``stale_after`` seconds. Changes of that level are logged once each (WARN and STALE as
+warnings, ERROR as an error, back to OK as info).
 """
 
 from collections import deque
@@ -38,11 +39,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
+from cvc_balance.identify.evidence import RESIDUAL_WARN, verdict_of_record
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, WrenchStampedEncoder
 from cvc_balance.physics import assessment
 from cvc_balance.physics.engine import RotorModel, sample_loads
-from cvc_balance.physics.frames import degrees, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.physics.frames import degrees_360, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout import LayoutError, one_line
 from cvc_balance.physics.layout_file import (collector_paused, layout_from_text,
                                              MAX_TEXT_BYTES)
@@ -84,7 +86,8 @@ PARAMETERS = (
      (1e-3, 1e6)),
     ('identify_window_revs', 10, 'revolutions over which the load cells fit the measured '
      'unbalance (supports/<name>/measured_load)', (1, 100000)),
-    ('residual_warn', 0.5, 'WARN when a plane\'s residual (measured - layout) exceeds this '
+    ('residual_warn', RESIDUAL_WARN, 'WARN when a plane\'s residual (measured - layout) '
+     'exceeds this '
      'fraction of its permissible unbalance (and its 95 % radius)', (0.01, 100.0)),
     ('diagnostics_period', 1.0, 'period (s) of /diagnostics', (0.01, 60.0)),
     ('stale_after', 2.0, '/diagnostics says STALE when no motion sample was accepted for '
@@ -473,13 +476,13 @@ class BalanceMonitor(Node):
             level, message = DiagnosticStatus.WARN, 'no layout (waiting for one on the ' \
                 f'{topics.LAYOUT} topic)'
         else:
-            level, message, balance = self._judge(active)
+            level, message, balance, of_record = self._judge(active)
             values.update(balance)
             if rejected:        # the verdict stands, but the input is not all well
                 level = max(level, DiagnosticStatus.WARN)
                 message += (f'; {rejected} motion samples rejected in the last {period:.2g} s '
                             f'(last: {self._last_rejection})')
-            statuses += self._measured_status(active)
+            statuses += self._measured_status(active, of_record)
             quiet = now - (self._last_input if self._last_input is not None else self._started)
             values['last motion sample [s ago]'] = quiet if self._last_input is not None else ''
             if quiet > self.params['stale_after']:
@@ -497,11 +500,9 @@ class BalanceMonitor(Node):
         self._diagnostics_pub.publish(array)
         self._log_transition(level, message)
 
-    def _measured_status(self, active):
+    def _measured_status(self, active, of_record):
         """Return the load cells' status (a second DiagnosticStatus) once cells have read."""
-        grade = self.params['balance_grade'] or active.layout.balancing.grade
-        diagnosis = active.cells.diagnose(self._top_speed, grade, self.params['warn_fraction'],
-                                          self.params['residual_warn'])
+        diagnosis = active.cells.diagnose(of_record)
         if diagnosis is None:
             return []
         level, message, values = diagnosis
@@ -544,45 +545,59 @@ class BalanceMonitor(Node):
             logger.info(text)
 
     def _judge(self, active):
-        """Diagnostics level, message and values of the layout in force."""
+        """
+        Diagnostics level, message and values of the layout in force, and its verdict of record.
+
+        The verdict of record (:func:`cvc_balance.identify.evidence.verdict_of_record`) is the
+        measured rotor's once the load cells can tell, else the layout's, labelled; the
+        layout's assessment follows in the values as what the layout expects.
+        """
         layout = active.layout
         grade = self.params['balance_grade'] or layout.balancing.grade
-        verdict = assessment.judge_balance(active.model, self._top_speed, grade,
-                                           self.params['warn_fraction'])
+        of_record = verdict_of_record(active.model, active.cells.estimate, self._top_speed,
+                                      grade, self.params['warn_fraction'],
+                                      self.params['residual_warn'])
+        verdict = of_record.layout
         values = {'layout': layout.name, 'layout digest': active.digest,
                   'speed [rad/s]': abs(self._omega), 'top speed seen [rad/s]': self._top_speed,
-                  'grade [mm/s]': grade, 'verdict level': verdict.level,
-                  'verdict': verdict.text}
+                  'grade [mm/s]': grade, 'verdict level': of_record.level,
+                  'verdict': of_record.statement,
+                  'verdict source': of_record.source,
+                  'achieved grade [mm/s]': of_record.equivalent_grade
+                  if of_record.equivalent_grade is not None else '',
+                  'layout verdict level': verdict.level, 'layout verdict': verdict.text}
         judged = verdict.assessment
         if judged is not None:
             values.update({'judged at [rad/s]': judged.omega,
                            'judged at': verdict.speed_source,
-                           'achieved grade [mm/s]': judged.equivalent_grade,
+                           'layout achieved grade [mm/s]': judged.equivalent_grade,
                            'static unbalance [g mm]': g_mm(judged.static_amount),
-                           'static unbalance angle [deg]': degrees(judged.static_angle),
+                           'static unbalance angle [deg]': degrees_360(judged.static_angle),
                            'couple unbalance [g mm^2]': g_mm2(judged.couple_amount),
-                           'couple unbalance angle [deg]': degrees(judged.couple_angle),
+                           'couple unbalance angle [deg]': degrees_360(judged.couple_angle),
                            'permissible [g mm]': g_mm(judged.permissible)})
             for label, plane, allowed, fraction in zip(('I', 'II'), judged.planes,
                                                        judged.plane_permissible,
                                                        judged.fractions):
                 values.update({f'plane {label} z [m]': plane.z,
                                f'plane {label} unbalance [g mm]': g_mm(plane.amount),
-                               f'plane {label} angle [deg]': degrees(plane.angle),
+                               f'plane {label} angle [deg]': degrees_360(plane.angle),
                                f'plane {label} permissible [g mm]': g_mm(allowed),
                                f'plane {label} unbalance / permissible': fraction,
                                f'plane {label} correction mass [g]':
                                    'none (no correction radius)' if plane.correction_mass is None
                                    else plane.correction_mass * 1e3,
                                f'plane {label} correction angle [deg]':
-                                   degrees(plane.correction_angle)})
-        level, message = LEVELS[verdict.level], verdict.text
+                                   degrees_360(plane.correction_angle)})
+        level, message = LEVELS[of_record.level], of_record.text
+        if of_record.source == 'measured':
+            message += f'; {of_record.layout_text}'
         values['layout warnings'] = ' | '.join(active.warnings)
         if active.warnings:
             message += f'; layout implausible? {len(active.warnings)} warning(s): ' \
                 f'{active.warnings[0]}'
             level = max(level, DiagnosticStatus.WARN)
-        return level, message, values
+        return level, message, values, of_record
 
     def _declare_parameters(self):
         values = {}

@@ -6,21 +6,21 @@ an O(1) sliding fit over revolutions (:class:`cvc_balance.identify.live.SlidingF
 at each completed revolution the fit is solved and ``identified_unbalance`` and
 ``unbalance_residual`` are published (WrenchStamped, rotor frame, the convention of
 ``unbalance``: force U omega^2, torque omega^2 (-P_yz, P_xz, 0) about the centre of
-mass, at the speed of the sample that completed the revolution). The diagnostics get
-the identified verdict (the one definition, ``judge_balance``, on the measured rotor),
-the residual per plane against ``residual_warn`` of its permissible share, and the fit.
+mass, at the speed of the sample that completed the revolution). The fit's estimate feeds
+the node's verdict of record (:mod:`cvc_balance.identify.evidence`); the second
+diagnostic status gets what the cells measured, the residual per plane and the fit.
 """
 
 from functools import partial
 
 from geometry_msgs.msg import WrenchStamped
 
-from cvc_balance.identify.estimate import (identified_unbalance, layout_unbalance, residual,
-                                           rotor_with)
+from cvc_balance.identify.estimate import identified_unbalance, layout_unbalance, residual
+from cvc_balance.identify.fit import Estimate
 from cvc_balance.identify.live import SlidingFit
 from cvc_balance.messages import topics
 from cvc_balance.physics import assessment
-from cvc_balance.physics.frames import degrees, g_mm
+from cvc_balance.physics.frames import degrees_360, g_mm
 from cvc_balance.physics.unbalance import unbalance_wrench
 
 
@@ -75,53 +75,57 @@ class LoadCells:
             self.emit(topic, sec, nanosec, *unbalance_wrench(
                 (static.real, static.imag), (couple.real, couple.imag), omega))
 
-    def diagnose(self, top_speed, grade, warn_fraction, residual_warn):
+    @property
+    def estimate(self):
+        """
+        The latest fit, for the verdict of record; None when no cell has read yet.
+
+        Before the first whole revolution: an estimate that cannot tell (the layout's
+        verdict then stands, labelled so).
+        """
+        if not any(self.readings.values()):
+            return None
+        if self.found is None:
+            return Estimate.unknown(len(self.model.supports), sum(self.readings.values()))
+        return self.found[0]
+
+    def diagnose(self, of_record):
         """
         Return (verdict level, message, values) of what the cells measured, or None.
 
-        Levels of :mod:`cvc_balance.physics.assessment`: the measured rotor's verdict;
-        WARN at least when a plane's residual is beyond ``residual_warn`` of its
-        permissible share and beyond its 95 % radius (the layout does not describe the
-        rotor).
+        ``of_record``: the node's :class:`~cvc_balance.identify.evidence.VerdictOfRecord`
+        (made from :attr:`estimate`): its measured verdict, why it cannot tell, and where
+        the rotor is not what its layout says, with the identified values behind them.
         """
         values = {f'cell {name} readings': count for name, count in self.readings.items()}
         values['cell readings dropped'] = self.fit.dropped
-        if self.found is None:
-            return None if not any(self.readings.values()) else (
-                assessment.NOT_JUDGED, 'load cells: not a whole revolution yet', values)
+        if not any(self.readings.values()):
+            return None
+        if self.found is None or of_record.measured is None:
+            return (assessment.NOT_JUDGED, of_record.reason, values)
         estimate, found, diff = self.found
         values.update({'fit window [rev]': min(self.fit.revolutions, self.fit.window_revs),
-                       'fit readings': estimate.readings})
-        if not estimate.identifiable:
-            return (assessment.NOT_JUDGED, 'load cells: the readings cannot tell the '
-                    'unbalance yet (too few readings, no rotation or no speed)', values)
-        values['fit sigma [N]'] = estimate.sigma
-        measured = rotor_with(self.model, estimate.static, estimate.products)
-        verdict = assessment.judge_balance(measured, top_speed, grade, warn_fraction)
-        level, message = verdict.level, f'measured: {verdict.text}'
-        judged = verdict.assessment
-        values['measured verdict'] = verdict.text
+                       'fit readings': estimate.readings, 'fit sigma [N]': estimate.sigma})
+        measured = of_record.measured
+        values['measured verdict'] = measured.text
         values['measured static [g mm]'] = g_mm(found.static.amount)
-        values['measured static angle [deg]'] = degrees(found.static.angle)
+        values['measured static angle [deg]'] = degrees_360(found.static.angle)
         values['measured static 95% radius [g mm]'] = g_mm(found.static.ci95)
-        worst = []
+        judged = measured.assessment
         for label, (z, got), (_, off), allowed in zip(
                 ('I', 'II'), found.planes, diff.planes,
                 judged.plane_permissible if judged is not None else (None, None)):
             values.update({f'measured plane {label} [g mm]': g_mm(got.amount),
-                           f'measured plane {label} angle [deg]': degrees(got.angle),
+                           f'measured plane {label} angle [deg]': degrees_360(got.angle),
                            f'measured plane {label} 95% radius [g mm]': g_mm(got.ci95),
                            f'residual plane {label} [g mm]': g_mm(off.amount),
-                           f'residual plane {label} angle [deg]': degrees(off.angle)})
+                           f'residual plane {label} angle [deg]': degrees_360(off.angle)})
             if allowed:
-                fraction = off.amount / allowed
-                values[f'residual plane {label} / permissible'] = fraction
-                if fraction > residual_warn and off.amount > off.ci95:
-                    worst.append(f'plane {label} {g_mm(off.amount):.0f} g mm at '
-                                 f'{degrees(off.angle):.0f} deg ({fraction:.2f} of its '
-                                 'permissible)')
-        if worst:
-            message += '; the rotor is not what its layout says: residual ' + ', '.join(worst)
-            if level in (assessment.OK, assessment.NOT_JUDGED):
-                level = assessment.WARN
-        return level, message, values
+                values[f'residual plane {label} / permissible'] = off.amount / allowed
+        message = f'measured: {measured.text}'
+        if of_record.reason:
+            message += f' (not yet the verdict of record: {of_record.reason})'
+        if of_record.disagreements:
+            message += f'; {of_record.disagreement_text}'
+        return of_record.level if of_record.source == 'measured' else measured.level, \
+            message, values

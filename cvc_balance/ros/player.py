@@ -254,4 +254,7 @@ def format_verdicts(verdicts):
     for digest, values in verdicts.items():
         lines.append(f"  {values.get('layout', '?')} {digest}: "
                      f"{values.get('verdict level', '?')}  {values.get('verdict', '')}")
+        if values.get('verdict source') == 'measured':     # the layout's, beside it
+            lines.append(f"      the layout expects {values.get('layout verdict level', '?')}: "
+                         f"{values.get('layout verdict', '')}")
     return '\n'.join(lines)

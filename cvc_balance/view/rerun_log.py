@@ -38,10 +38,11 @@ import rerun as rr
 import rerun.blueprint as rrb
 import rerun.blueprint.encodings as rre
 
+from cvc_balance.identify.evidence import MEASURED
 from cvc_balance.physics import assessment
 from cvc_balance.physics.assessment import assess_balance, judge_balance, WARN_FRACTION
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.frames import degrees, g_mm, stator_tilt
+from cvc_balance.physics.frames import degrees_360, g_mm, stator_tilt
 from cvc_balance.physics.load_parts import support_load_parts
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import plane_unbalances, static_unbalance, unbalance_wrench
@@ -154,12 +155,18 @@ def _polar_title(key):
 class RunLogger:
     """Log a run to a rerun recording (see the module's description)."""
 
-    def __init__(self, recording, every=1, grade=None, warn_fraction=WARN_FRACTION):
+    def __init__(self, recording, every=1, grade=None, warn_fraction=WARN_FRACTION,
+                 evidence=None):
         """
         Log to ``recording`` (a rerun.RecordingStream); arrows every ``every``-th sample.
 
         ``grade`` (mm/s, default each layout's) and ``warn_fraction`` as the node's.
+        ``evidence``: {(layout digest, segment start ns): VerdictOfRecord} of a bag's
+        segments (:func:`cvc_balance.bag.identify_run.segment_verdict`), known before the
+        replay, so the verdict lane and panel lead with the measured rotor from the start.
         """
+        self._evidence = dict(evidence or {})
+        self._record = None          # the segment's VerdictOfRecord (None: the layout's)
         self.rec = recording
         self.every = every
         self.grade = grade or None
@@ -172,6 +179,7 @@ class RunLogger:
         self._top_speed = 0.0
         self._drawn_top = 0.0
         self._verdict = None
+        self._shown = None            # (level, record) last logged on the lane
         self._unit_fractions = ()     # fractions at 1 rad/s (layouts without a service speed)
         self._level_code = 0
         self._static_range = None      # N, the static weight plot's axis
@@ -187,18 +195,20 @@ class RunLogger:
 
     # -- a layout comes into force -------------------------------------------------
 
-    def layout(self, time_ns, model):
+    def layout(self, time_ns, model, segment_start_ns=None):
         """
         Draw the rotor of a layout in force from ``time_ns``, judge it and say so.
 
         ``time_ns`` None: from the next sample's stamp (the live node before any sample:
-        its stamps, not the wall clock, are the time line).
+        its stamps, not the wall clock, are the time line). ``segment_start_ns``: the log
+        time the layout came into force (a bag's segment; the key of ``evidence``).
         """
         if time_ns is None:
             self._pending = model
             return
         self._pending = None
         layout = model.layout
+        self._record = self._evidence.get((layout.digest(), segment_start_ns))
         rec = self.rec
         previous = self._model.layout if self._model is not None else None
         planes = plane_keys(layout)
@@ -273,9 +283,14 @@ class RunLogger:
                         static=True)
         for key in planes:
             label = 'static' if key == 'static' else f'plane {key[6:]}'
+            # The layout's paler and thinner; the load cells' (when they can tell) full.
+            pale = tuple((c + 255) // 2 for c in PLANE_COLOURS[key])
             rec.log(f'plots/unbalance/{key}', rr.SeriesLines(
-                names=[f'{label} [U / permissible]'], colors=[PLANE_COLOURS[key]],
-                widths=[2.0]), static=True)
+                names=[f'{label} layout [U / permissible]'], colors=[pale],
+                widths=[1.5]), static=True)
+            rec.log(f'plots/unbalance/measured_{key}', rr.SeriesLines(
+                names=[f'{label} measured [U / permissible]'], colors=[PLANE_COLOURS[key]],
+                widths=[3.0]), static=True)
             rec.log(f'polar/{key}/grid', _polar_grid(), static=True)
             rec.log(f'polar/{key}/grid_labels', _polar_grid_labels(), static=True)
         for name in supports:
@@ -304,24 +319,51 @@ class RunLogger:
 
     def _judge(self, top_speed, quiet=False):
         """
-        Judge the layout in force at the top speed seen; log the verdict.
+        Judge the layout in force at the top speed seen; log the verdict of record.
 
+        The lane, the panel and the drawings are the measured rotor's when the segment's
+        load cells can tell (:mod:`cvc_balance.identify.evidence`), else the layout's.
         ``quiet``: only the text and drawings follow (the top speed grew, the level
         did not change).
         """
         verdict = judge_balance(self._full, top_speed, self._grade(), self.warn_fraction)
-        old, self._verdict = self._verdict, verdict
+        old, self._verdict = self._shown, verdict
+        record = self._record
+        measured = record is not None and record.source == MEASURED
+        level = record.level if measured else verdict.level
+        self._shown = (level, record if measured else None)
         rec = self.rec
         if not quiet:
-            rec.log('verdict_level', rr.StateChange(state=verdict.level))
-        rec.log('verdict', rr.TextDocument(self._verdict_text(verdict),
+            rec.log('verdict_level', rr.StateChange(state=level))
+        rec.log('verdict', rr.TextDocument(self._verdict_text(verdict, record),
                                            media_type='text/markdown'))
-        if not quiet and (old is None or old.level != verdict.level or top_speed == 0.0):
-            a = verdict.assessment
-            said = verdict.words if a is None else \
-                f'G {a.equivalent_grade:.3g} at {a.omega:.4g} rad/s: {verdict.words}'
-            self._event(said, LOG_LEVELS[verdict.level], LEVEL_COLOURS[verdict.level])
-        self._draw_balance(verdict)
+        if not quiet and (old is None or old != self._shown or top_speed == 0.0):
+            if measured:
+                said = f'{level}: {record.statement}'
+            else:
+                a = verdict.assessment
+                said = f'{level}: ' + (verdict.words if a is None else
+                                       f'G {a.equivalent_grade:.3g} at {a.omega:.4g} rad/s: '
+                                       f'{verdict.words} (from the layout)')
+            self._event(said, LOG_LEVELS[level], LEVEL_COLOURS[level])
+        self._draw_balance(record.measured if measured else verdict)
+
+    def evidence(self, time_ns, of_record):
+        """
+        Take the live node's verdict of record from ``time_ns`` (ns); log it when it changes.
+
+        A change is a new level or source, or an achieved grade 3 % off the one shown.
+        """
+        old, self._record = self._record, of_record
+        if self._model is None:
+            return
+        if old is not None and (old.level, old.source) == (of_record.level, of_record.source):
+            before, now = old.equivalent_grade, of_record.equivalent_grade
+            if before is None or now is None or abs(now - before) <= 0.03 * abs(before):
+                return
+        self._time_ns = time_ns
+        self.rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        self._judge(self._top_speed)
 
     def _event(self, text, level, colour=None):
         """Log an events line, its time first (the time column would take the width)."""
@@ -329,17 +371,32 @@ class RunLogger:
         self.rec.log('events', rr.TextLog(f"{clock.strftime('%H:%M:%S.%f')[:11]}  {text}",
                                           level=level, color=colour))
 
-    def _verdict_text(self, verdict):
+    def _verdict_text(self, verdict, record=None):
+        """
+        The verdict panel (Markdown): the verdict of record and its source first.
+
+        Measured: the measured rotor's grade and corrections, what the layout expects,
+        and where the rotor is not what its layout says. Else the layout's, labelled.
+        """
         layout = self._model.layout
-        a = verdict.assessment
-        lines = [f'## {verdict.level}: {verdict.words}', '',
+        measured = record is not None and record.source == MEASURED
+        shown = record.measured if measured else verdict
+        level = record.level if measured else verdict.level
+        a = shown.assessment
+        source = record.source_text if record is not None else 'from the layout'
+        lines = [f'## {level}: {shown.words}', '', f'**{source}**', '',
                  f"layout **{layout.name}** (`{layout.digest()}`)", '']
+        if measured:
+            lines += [record.layout_text, '']
+            if record.disagreements:
+                lines += [f'**{record.disagreement_text}**', '']
         if a is None:
-            lines.append(verdict.text)
+            lines.append(shown.text)
         else:
-            lines += [f'achieved **G {a.equivalent_grade:.3g}** at the {verdict.speed_source} '
+            lines += [f'achieved **G {a.equivalent_grade:.3g}** at the {shown.speed_source} '
                       f'{a.omega:.4g} rad/s; U_per {g_mm(a.permissible):,.0f} g mm', '',
-                      f'correction masses at r {layout.correction_radius():.3g} m:'
+                      f'correction masses at r {layout.correction_radius():.3g} m'
+                      + (' (for the measured rotor):' if measured else ':')
                       if a.planes else 'no correction planes: the static unbalance is judged',
                       '',
                       '| plane | U [g mm] | angle | / limit | add |',
@@ -347,11 +404,11 @@ class RunLogger:
             for key, p, allowed, fraction in zip(PLANES, a.planes, a.plane_permissible,
                                                  a.fractions):
                 lines.append(f'| {key[6:]} | {g_mm(p.amount):,.0f} | '
-                             f'{degrees(p.angle):.1f}° | {fraction:.2f} | '
-                             f'{_added(p)[4:]} at {degrees(p.correction_angle):.1f}° |')
+                             f'{degrees_360(p.angle):.1f}° | {fraction:.2f} | '
+                             f'{_added(p)[4:]} at {degrees_360(p.correction_angle):.1f}° |')
             if not a.planes:
                 lines.append(f'| static | {g_mm(a.static_amount):,.0f} | '
-                             f'{degrees(a.static_angle):.1f}° | {a.fractions[0]:.2f} | |')
+                             f'{degrees_360(a.static_angle):.1f}° | {a.fractions[0]:.2f} | |')
         if self._changes:
             lines += ['', 'changed: ' + '; '.join(f'**{name}** {change}'
                                                   for name, change in self._changes.items())]
@@ -378,7 +435,7 @@ class RunLogger:
                 colors=[CORRECTION_COLOUR], labels=[text] if text else None))
             self._draw_polar(key, fraction, plane.angle, g_mm(plane.amount), g_mm(allowed),
                              f'{_added(plane)} at '
-                             f'{degrees(plane.correction_angle):.0f}°, r '
+                             f'{degrees_360(plane.correction_angle):.0f}°, r '
                              f'{plane.correction_radius:.2f} m')
         if not a.planes:
             self._draw_polar('static', a.fractions[0], a.static_angle, g_mm(a.static_amount),
@@ -406,7 +463,7 @@ class RunLogger:
         # Labels apart: the vectors' values above and below the grid (in their colours),
         # each ring's label a quarter turn away from both vectors.
         positions = [[0.0, -POLAR_TEXT_ROW - 0.15]]    # labels hang below their point
-        texts = [f'U {amount:,.0f} g mm at {degrees(angle):.0f}° = {fraction:.2f}']
+        texts = [f'U {amount:,.0f} g mm at {degrees_360(angle):.0f}° = {fraction:.2f}']
         if correction is not None:
             positions.append([0.0, POLAR_TEXT_ROW])
             texts.append(correction)
@@ -445,21 +502,25 @@ class RunLogger:
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
                             recording=self.rec)
 
-    def measured(self, time_ns, residual, identified):
+    def measured(self, time_ns, residual, identified, of_record=None):
         """
         Draw what the cells found, from ``time_ns``, and say it in the events.
 
         Per plane the residual (measured - declared, a
         :class:`cvc_balance.identify.RotorUnbalance`) on its polar diagram, in the
         diagram's units (fractions of the plane's permissible share), with its 95 % radius.
+        ``of_record``: the segment's verdict of record (its layout's permissible shares;
+        the event's level: WARN or ERROR when the rotor is not what its layout says).
         """
-        verdict = self._verdict
+        verdict = of_record.layout if of_record is not None else self._verdict
         if verdict is None or verdict.assessment is None:
             return
         rec = self.rec
+        self._time_ns = time_ns
         rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
         allowed = verdict.assessment.plane_permissible
-        for key, (_, off), share in zip(self._planes, residual.planes, allowed):
+        planes = PLANES      # residual.planes is empty without correction planes
+        for key, (_, off), share in zip(planes, residual.planes, allowed):
             reach = min(off.amount / share, POLAR_REACH)
             c, s = math.cos(off.angle), math.sin(off.angle)
             rec.log(f'polar/{key}/residual', rr.Arrows2D(
@@ -470,12 +531,16 @@ class RunLogger:
             rec.log(f'polar/{key}/residual_label', rr.Points2D(
                 [[0.0, -POLAR_TEXT_ROW + 0.08]], radii=0.0, colors=[RESIDUAL_COLOUR],
                 labels=[f'cells - layout {g_mm(off.amount):,.0f}±{g_mm(off.ci95):,.0f} g mm '
-                        f'{degrees(off.angle):.0f}°'],
+                        f'{degrees_360(off.angle):.0f}°'],
                 show_labels=True))
-        found = '; '.join(f'{key[6:]} {g_mm(v.amount):,.0f} g mm at {degrees(v.angle):.0f}°'
-                          for key, (_, v) in zip(self._planes, residual.planes))
-        self._event(f'load cells: the rotor differs from its layout by {found}', 'INFO',
-                    RESIDUAL_COLOUR)
+        if of_record is not None and of_record.disagreements:
+            level = assessment.ERROR if of_record.level == assessment.ERROR else assessment.WARN
+            self._event(of_record.disagreement_text, LOG_LEVELS[level], LEVEL_COLOURS[level])
+            return
+        found = '; '.join(f'{key[6:]} {g_mm(v.amount):,.0f} g mm at {degrees_360(v.angle):.0f}°'
+                          for key, (_, v) in zip(planes, residual.planes))
+        self._event(f'load cells: the rotor agrees with its layout (cells - layout: {found})',
+                    'INFO', RESIDUAL_COLOUR)
 
     # -- samples ----------------------------------------------------------------------
 
@@ -511,6 +576,10 @@ class RunLogger:
         fractions = self._fractions(top, n)
         for key, values in zip(self._planes, fractions):
             scalars[f'plots/unbalance/{key}'] = values
+        record = self._record
+        if record is not None and record.source == MEASURED and record.measured.assessment:
+            for key, fraction in zip(self._planes, record.measured.assessment.fractions):
+                scalars[f'plots/unbalance/measured_{key}'] = np.full(n, fraction)
         for path, values in scalars.items():
             rr.send_columns(path, indexes=[times],
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
