@@ -483,6 +483,8 @@ class BalanceMonitor(Node):
                 message += (f'; {rejected} motion samples rejected in the last {period:.2g} s '
                             f'(last: {self._last_rejection})')
             statuses += self._measured_status(active, of_record)
+            if self._rerun is not None and self._last_time is not None:
+                self._rerun.evidence(int(self._last_time * 1e9), of_record)
             quiet = now - (self._last_input if self._last_input is not None else self._started)
             values['last motion sample [s ago]'] = quiet if self._last_input is not None else ''
             if quiet > self.params['stale_after']:
