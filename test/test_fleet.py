@@ -112,9 +112,13 @@ def test_every_row_is_replay_json_of_its_bag(fleet):
                 ('peak_load_N', segment['peak_load_N']), ('model', segment['model']),
                 ('grade', segment['balance']['grade']),
                 ('permissible_g_mm', segment['balance']['permissible_g_mm']),
-                ('level', segment['balance']['level']),
-                ('verdict', segment['balance']['verdict']),
-                ('equivalent_grade', segment['balance']['equivalent_grade'])):
+                ('level', segment['verdict']['level']),
+                ('verdict', segment['verdict']['verdict']),
+                ('equivalent_grade', segment['verdict']['equivalent_grade']),
+                ('verdict_source', segment['verdict']['source']),
+                ('layout_level', segment['balance']['level']),
+                ('layout_verdict', segment['balance']['verdict']),
+                ('layout_equivalent_grade', segment['balance']['equivalent_grade'])):
             assert row[column] == value, (bag, column)
         assert dict(row['peak_support_load_N']) == segment['peak_support_load_N']
         identified = segment['identified']

@@ -4,8 +4,10 @@ The fleet's tables: a row per run and layout segment, and a row per failed bag.
 A row is the bag's replay record (:func:`cvc_balance.bag.run_summary.analyse_bag`, what
 ``cvc-balance replay BAG --json`` prints) flattened: run columns repeated on each of its
 segments, the segment's numbers, the two correction planes as ``plane_I_*`` and
-``plane_II_*``, and the load cells' identification as ``identified_*`` and ``residual_*``
-(null without cells). Times are UTC timestamps (ns). Units as in the record: SI, g mm and
+``plane_II_*`` (the layout's), the verdict of record (``level``, ``verdict``,
+``equivalent_grade``: the measured rotor's when its load cells can tell, ``verdict_source``
+says which) beside the layout's (``layout_*``), and the load cells' identification as
+``identified_*`` and ``residual_*`` (null without cells). Times are UTC timestamps (ns). Units as in the record: SI, g mm and
 degrees where the name says so. The schemas are fixed here, so every run of the tool
 writes the same columns and DuckDB, pandas or Spark read the table alike.
 """
@@ -37,7 +39,12 @@ _PLANE = [('z', pa.float64()), ('g_mm', pa.float64()), ('angle_deg', pa.float64(
           ('permissible_g_mm', pa.float64()), ('fraction', pa.float64()),
           ('correction_mass_kg', pa.float64()), ('correction_angle_deg', pa.float64())]
 _VERDICT = [('equivalent_grade', pa.float64()), ('finest_grade_met', pa.float64()),
-            ('within_grade', pa.bool_()), ('level', pa.string()), ('verdict', pa.string())]
+            ('within_grade', pa.bool_()), ('level', pa.string()), ('verdict', pa.string()),
+            ('verdict_source', pa.string()), ('verdict_reason', pa.string()),
+            ('disagreement', pa.string()), ('layout_equivalent_grade', pa.float64()),
+            ('layout_level', pa.string()), ('layout_verdict', pa.string())]
+"""The verdict of record (the measured rotor's when the cells can tell, see
+:mod:`cvc_balance.identify.evidence`) and the layout's beside it."""
 _IDENTIFIED = [('identified_readings', pa.int64()), ('identified_revolutions', pa.float64()),
                ('identifiable', pa.bool_()), ('fit_rms_N', pa.float64())]
 _VECTOR = [('', pa.float64()), ('_angle_deg', pa.float64()), ('_ci95', pa.float64())]
@@ -100,9 +107,13 @@ def segment_columns(index, segment):
     }
     balance = segment['balance'] or {}
     for key in ('grade', 'service_speed', 'speed_source', 'permissible_g_mm', 'static_g_mm',
-                'static_angle_deg', 'equivalent_grade', 'finest_grade_met', 'within_grade',
-                'level', 'verdict'):
+                'static_angle_deg'):
         row[key] = balance.get(key)
+    verdict = segment['verdict']
+    for key in ('equivalent_grade', 'finest_grade_met', 'within_grade', 'level', 'verdict',
+                'layout_equivalent_grade', 'layout_level', 'layout_verdict', 'disagreement'):
+        row[key] = verdict[key]
+    row['verdict_source'], row['verdict_reason'] = verdict['source'], verdict['reason']
     planes = balance.get('planes') or []
     for p, plane in zip(PLANES, planes):
         for key, _ in _PLANE:

@@ -3,7 +3,8 @@ Trends per machine: each correction plane's unbalance over time, its drift, when
 
 Read with DuckDB straight from the results table (only the columns needed, only the
 machine asked for): per run and layout segment the plane's unbalance, the one the load
-cells identified where the bag has cells (the real rotor), else the layout's, and the
+cells identified where they can tell (the verdict of record is the measured rotor's), else
+the layout's, and the
 plane's permissible share of the grade at the service speed.
 
 The model per machine and plane, fitted by least squares:
@@ -118,10 +119,13 @@ def read_series(results, machine=None):
     columns = ['machine_id', 'epoch_ns(segment_start) AS t', 'layout_digest', 'layout_name',
                'grade']
     for p in PLANES:
+        # The measured plane where the verdict of record is the cells' (they can tell).
+        measured = "verdict_source = 'measured'"
         columns += [f'plane_{p}_permissible_g_mm AS permissible_{p}',
-                    f'coalesce(identified_plane_{p}_g_mm, plane_{p}_g_mm) AS amount_{p}',
-                    f'identified_plane_{p}_g_mm_ci95 AS ci95_{p}',
-                    f'identified_plane_{p}_g_mm IS NOT NULL AS identified_{p}']
+                    f'CASE WHEN {measured} THEN identified_plane_{p}_g_mm '
+                    f'ELSE plane_{p}_g_mm END AS amount_{p}',
+                    f'CASE WHEN {measured} THEN identified_plane_{p}_g_mm_ci95 END AS ci95_{p}',
+                    f'coalesce({measured}, false) AS identified_{p}']
     # A run analysed again (its bag changed: a new digest) counts once: the latest.
     query = (f"SELECT {', '.join(columns)} FROM read_parquet(?) "
              'WHERE segment_samples > 0 AND plane_I_permissible_g_mm IS NOT NULL '

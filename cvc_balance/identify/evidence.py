@@ -160,15 +160,20 @@ class VerdictOfRecord:
         """
         Return it as JSON-able data: one ``verdict`` object per segment.
 
-        Keys: level, verdict, equivalent_grade, source, source_text, headline,
+        Keys: level, verdict, equivalent_grade, finest_grade_met, within_grade, source,
+        source_text, headline,
         layout_expects, disagreement (text), layout_level,
         layout_verdict, layout_equivalent_grade, measured_level, measured_equivalent_grade,
         reason, disagreements, explanation. None (null) where nothing was computed.
         """
         layout, measured = self.layout, self.measured
+        judged = self.verdict.assessment
         return {
             'level': self.level, 'verdict': self.words,
-            'equivalent_grade': self.equivalent_grade, 'source': self.source,
+            'equivalent_grade': self.equivalent_grade,
+            'finest_grade_met': None if judged is None else judged.finest_grade_met,
+            'within_grade': None if judged is None else judged.within_grade,
+            'source': self.source,
             'source_text': self.source_text, 'headline': self.headline,
             'layout_expects': self.layout_text, 'disagreement': self.disagreement_text or None,
             'layout_level': layout.level, 'layout_verdict': layout.words,
