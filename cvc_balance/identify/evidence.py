@@ -270,11 +270,15 @@ def explain(model, diff):
         if moment <= 0.0:
             continue
         effect = _effect(model, moment * cmath.exp(1j * component.angle), component.z)
-        candidates += _component_candidates(component, effect, vector)
-    candidates += _unlisted_candidates(model, vector)
+        candidates += [(left, 0, phrase)
+                       for left, phrase in _component_candidates(component, effect, vector)]
+    # A part the layout lists explains better than a mass it does not, when both fit.
+    candidates += [(left, 1, phrase) for left, phrase in _unlisted_candidates(model, vector)]
     if not candidates:
         return None
-    left, phrase = min(candidates)
+    best = min(left for left, *_ in candidates)
+    left, _, phrase = min((c for c in candidates if c[0] <= best + 1e-9 * size),
+                          key=lambda c: (c[1], c[0]))
     if left <= max(EXPLAINED * size, noise):
         return phrase
     return None
@@ -345,7 +349,7 @@ def _unlisted_candidates(model, vector):
         share = (vector[1] / moment).real
         z = z_i + share * (z_ii - z_i)
         fitted = _effect(model, moment, z)
-        where = f', z {z:.3g} m'
+        where = f', z {z:.3f} m'
     mass = f'{abs(moment) / radius * 1e3:.0f} g at the correction radius {radius:g} m' \
         if radius > 0.0 else f'{g_mm(abs(moment)):.0f} g mm'
     angle = degrees_360(cmath.phase(moment))
