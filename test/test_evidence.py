@@ -303,3 +303,48 @@ def test_a_disagreement_within_the_residual_share_is_no_alarm():
     (plane,) = verdict.disagreements
     assert plane.plane == 'II' and plane.fraction == pytest.approx(0.6, rel=1e-9)
     assert verdict.level in ('WARN', 'ERROR')
+
+
+def test_the_node_and_play_lead_with_the_measured_verdict(bags, tmp_path):
+    """The node's first /diagnostics status, its log line and play's summary: measured."""
+    import signal
+    from rosbags.highlevel import AnyReader
+    from ros_harness import NodeProcess, ros_environment
+    node = NodeProcess('cvc_balance.ros.balance_monitor', ['-p', 'identify_window_revs:=8'],
+                       tmp_path / 'node.log')
+    live = tmp_path / 'live.mcap'
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bags['differs']),
+                          '-o', str(live), '--wait', '60'], env=ros_environment(),
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr
+    assert node.stop(signal.SIGINT) == 0
+    statuses = []
+    with AnyReader([live]) as reader:
+        for connection, _, raw in reader.messages():
+            if connection.topic == '/diagnostics':
+                statuses.append(reader.deserialize(raw, connection.msgtype).status[0])
+    last = statuses[-1]
+    values = {kv.key: kv.value for kv in last.values}
+    assert last.level == 2 and values['verdict source'] == 'measured'     # ERROR
+    assert last.message.startswith('G ') and \
+        'OUT OF G 6.3 (measured by the load cells); the rotor is not what its layout says: ' \
+        'plane II +' in last.message
+    assert last.message.endswith('the layout expects OK: G 2.5 at the service speed 23.27 '
+                                 'rad/s: WITHIN G 6.3')
+    assert values['layout verdict level'] == 'OK'
+    # The measured grade against the true rotor's by hand (the node's window: 8 revs).
+    true = grade_by_hand(by_hand(with_extra(DECLARED, EXTRA)))
+    assert float(values['achieved grade [mm/s]']) == pytest.approx(true, rel=0.1)
+    # Before the cells could tell, the layout's verdict was the headline, labelled.
+    first = next(s for s in statuses if 'layout digest' in {kv.key for kv in s.values})
+    assert first.message.endswith('(from the layout: no load cells)') or \
+        '(from the layout: the load cells' in first.message
+    summary = run.stdout.splitlines()
+    at = summary.index("balance_monitor's verdict per layout (its /diagnostics):")
+    assert summary[at + 1].startswith('  ct_gantry_demo ') and \
+        ': ERROR  G ' in summary[at + 1] and \
+        summary[at + 1].endswith('OUT OF G 6.3 (measured by the load cells)')
+    assert summary[at + 2] == ('      the layout expects OK: G 2.5 at the service speed '
+                               '23.27 rad/s: WITHIN G 6.3')
+    log = (tmp_path / 'node.log').read_text()
+    assert '[ERROR]' in log and 'balance ERROR: G ' in log
