@@ -34,3 +34,10 @@ def support_load(name):
 def measured_load(name):
     """Return the topic of a support's load cell (WrenchStamped, stator frame, N)."""
     return f'supports/{name}/{MEASURED_LOAD}'
+
+
+# Sensors of rotors without an encoder (bag/channels.py): a keyphasor and vibration channels.
+KEYPHASOR = 'keyphasor'
+VECTOR3_STAMPED_TYPE = 'geometry_msgs/msg/Vector3Stamped'
+IMU_TYPE = 'sensor_msgs/msg/Imu'
+TIME_REFERENCE_TYPE = 'sensor_msgs/msg/TimeReference'
