@@ -7,7 +7,8 @@ time, its marks at the crossings of a threshold; a sensor_msgs/TimeReference top
 message per mark, ``time_ref`` the mark's time. By default the topic ``keyphasor`` (at the
 root or under one namespace); ``--keyphasor TOPIC`` names another.
 
-**Vibration channels**: every std_msgs/Float64 topic (but the keyphasor and ``speed``) is
+**Vibration channels**: every std_msgs/Float64 topic (but the keyphasor, and any topic
+named ``keyphasor`` or ``speed``) is
 one channel named by its topic, at its log times; geometry_msgs/Vector3Stamped (``x``,
 ``y``, ``z``) and sensor_msgs/Imu (its linear acceleration) three, ``TOPIC/x`` ...,
 at their header stamps. Units are as the user names them per topic (``--channel-unit
@@ -119,11 +120,11 @@ def vibration_channels(bag, units=None, exclude=()):
     no channel.
     """
     units = dict(units or {})
-    skip = {t.strip('/') for t in exclude} | {topics.SPEED}
+    skip = {t.strip('/') for t in exclude}
     sources, named = [], set()
     for channel in sorted(bag.channels.values(), key=lambda c: c.topic):
         topic = channel.topic.strip('/')
-        if topic in skip or topic.split('/')[-1] == topics.SPEED and channel.msg_type == FLOAT64:
+        if topic in skip or topic.split('/')[-1] in (topics.SPEED, topics.KEYPHASOR):
             continue
         if channel.msg_type not in (FLOAT64, VECTOR3_STAMPED, IMU):
             continue

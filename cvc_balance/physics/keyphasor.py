@@ -293,8 +293,9 @@ def steady_stretches(marks, tolerance=0.01, min_revolutions=MIN_STRETCH_REVS, sp
 
     A stretch is a run of good periods along which every mark's speed
     (:meth:`Marks.mark_speed` over ``span`` revolutions) stays within +-``tolerance`` of
-    the middle of their range, of at least ``min_revolutions``. Stretches are taken
-    greedily from the start; they never overlap and never hold a gap.
+    the middle of their range, then trimmed to its longest run within +-``tolerance`` of
+    its median speed, of at least ``min_revolutions``. Stretches are taken greedily from
+    the start; they never overlap and never hold a gap.
     """
     if not tolerance > 0.0:
         raise ValueError(f'speed tolerance must be > 0, got {tolerance}')
@@ -313,13 +314,28 @@ def steady_stretches(marks, tolerance=0.01, min_revolutions=MIN_STRETCH_REVS, sp
             if new_high - new_low > tolerance * (new_high + new_low):
                 break
             low, high, j = new_low, new_high, j + 1
-        if j - i >= min_revolutions:
-            inside = speed[i:j + 1]
-            duration = float(marks.time[j] - marks.time[i])
-            mean = TWO_PI * (j - i) / duration
-            stretches.append(Stretch(float(marks.time[i]), float(marks.time[j]), i, j, mean,
-                                     j - i, float(np.max(np.abs(inside - mean)) / mean)))
-            i = j
-        else:
+        if j - i < min_revolutions:
             i += 1
+            continue
+        # Trimmed to its longest run within +-tolerance of its median: a stretch that
+        # began on the end of a ramp keeps only the steady part.
+        median = float(np.median(speed[i:j + 1]))
+        near = np.abs(speed[i:j + 1] - median) <= tolerance * median
+        start, stop = _longest_run(near)
+        first, last = i + start, i + stop - 1
+        if last - first >= min_revolutions:
+            inside = speed[first:last + 1]
+            mean = TWO_PI * (last - first) / float(marks.time[last] - marks.time[first])
+            stretches.append(Stretch(float(marks.time[first]), float(marks.time[last]), first,
+                                     last, mean, last - first,
+                                     float(np.max(np.abs(inside - mean)) / mean)))
+        i = max(last, i + 1)
     return stretches
+
+
+def _longest_run(mask):
+    """Return (start, stop) of the longest run of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    longest = int(np.argmax(stops - starts))
+    return int(starts[longest]), int(stops[longest])
