@@ -24,23 +24,23 @@ TIME = np.arange(0.0, DURATION, 1.0 / RATE)
 
 
 def theta(t, speed=SPEED, alpha=ALPHA):
-    """The rotor's true angle, rad (0 at t = 0)."""
+    """Return the rotor's true angle, rad (0 at t = 0)."""
     return speed * t + 0.5 * alpha * t * t
 
 
 def true_marks(speed=SPEED, alpha=ALPHA, duration=TIME[-1]):
-    """Times (s) where theta = 2 pi k, k >= 1, solved by hand."""
+    """Return the times (s) where theta = 2 pi k, k >= 1, solved by hand."""
     k = np.arange(1, int(theta(duration, speed, alpha) / (2 * math.pi)) + 1)
     return (-speed + np.sqrt(speed * speed + 4 * math.pi * alpha * k)) / alpha
 
 
 def binary_tach(t):
-    """A reflective strip 60 deg wide: 1 while theta mod 2 pi < 60 deg, else 0."""
+    """Return a reflective strip 60 deg wide's tach: 1 while theta mod 2 pi < 60 deg."""
     return (np.mod(theta(t), 2 * math.pi) < math.pi / 3).astype(float)
 
 
 def edge_tach(t, volts=5.0, samples=3.0):
-    """An analog pick-up: a linear rising edge over ``samples`` samples centred on the mark."""
+    """Return an analog pick-up: a linear rising edge over ``samples`` samples at the mark."""
     wrapped = np.mod(theta(t) + math.pi, 2 * math.pi) - math.pi
     edge = 2 * math.pi * samples * SPEED / (2 * math.pi * RATE)
     return volts * np.clip(0.5 + wrapped / edge, 0.0, 1.0)

@@ -36,7 +36,7 @@ GLITCHES = (1.0, 4.0)                  # s: a tach pulse unseen, and a spike, bo
 
 
 def theta(t):
-    """The rotor's true angle (rad) at ``t`` (s after the start)."""
+    """Return the rotor's true angle (rad) at ``t`` (s after the start)."""
     t = np.asarray(t, float)
     alpha = (SECOND - FIRST) / RAMP
     ramp = np.clip(t - STEADY, 0.0, RAMP)
@@ -46,12 +46,12 @@ def theta(t):
 
 
 def speed(t):
-    """The rotor's true speed, rad/s."""
+    """Return the rotor's true speed, rad/s."""
     return np.interp(t, [STEADY, STEADY + RAMP], [FIRST, SECOND])
 
 
 def mark_times(duration):
-    """True marks (theta = 2 pi k) up to ``duration``, s, by bisection on theta."""
+    """Return the true marks (theta = 2 pi k) up to ``duration``, s, by bisection."""
     k = np.arange(1, int(theta(duration) / (2 * math.pi)) + 1)
     lo, hi = np.zeros(len(k)), np.full(len(k), duration)
     for _ in range(60):
@@ -62,7 +62,7 @@ def mark_times(duration):
 
 
 def tach_signal(t):
-    """An analog pick-up, 0-5 V: a linear edge over about 3 samples centred on each mark."""
+    """Return an analog pick-up, 0-5 V: a linear edge over about 3 samples at each mark."""
     wrapped = np.mod(theta(t) + math.pi, 2 * math.pi) - math.pi
     edge = 3.0 * speed(t) / TACH_RATE
     volts = 5.0 * np.clip(0.5 + wrapped / edge, 0.0, 1.0)
@@ -76,13 +76,13 @@ def tach_signal(t):
 
 
 def one_x(t, lag_deg):
-    """A channel's 1x: amplitude growing as the speed squared, peaking lag_deg after the mark."""
+    """Return a 1x growing as the speed squared, peaking ``lag_deg`` after the mark."""
     return AMPLITUDE * (speed(t) / FIRST) ** 2 * np.cos(theta(t) - math.radians(lag_deg))
 
 
 def header(ns):
-    stamp = TYPESTORE.types['builtin_interfaces/msg/Time'](sec=int(ns) // 10 ** 9,
-                                                          nanosec=int(ns) % 10 ** 9)
+    time_type = TYPESTORE.types['builtin_interfaces/msg/Time']
+    stamp = time_type(sec=int(ns) // 10 ** 9, nanosec=int(ns) % 10 ** 9)
     return TYPESTORE.types['std_msgs/msg/Header'](stamp=stamp, frame_id='bearing_front')
 
 
@@ -91,8 +91,12 @@ def serialized(msg, msg_type):
 
 
 def write_rig_bag(path, seed=5):
-    """The rig's run: /keyphasor (Float64), /marks (TimeReference), /accel (Float64),
-    /accel3 (Vector3Stamped) and /imu (Imu) with the same x, y, z, no joint_states."""
+    """
+    Write the rig's run and return its path.
+
+    /keyphasor (Float64), /marks (TimeReference), /accel (Float64), /accel3
+    (Vector3Stamped) and /imu (Imu) with the same x, y, z; no joint_states.
+    """
     duration = 2 * STEADY + RAMP
     rng = np.random.default_rng(seed)
     types = {name: TYPESTORE.types[name] for name in (
@@ -150,8 +154,11 @@ def cli(*args):
 
 
 def independent_fit(times_ns, values, start, end):
-    """Least squares c + a cos theta + b sin theta over [start, end) s since the epoch,
-    with the TRUE angle: (amplitude, lag deg)."""
+    """
+    Return (amplitude, lag deg) of a plain least-squares fit with the TRUE angle.
+
+    c + a cos theta + b sin theta over [start, end) s since the epoch.
+    """
     seconds = (np.asarray(times_ns) - START_NS) * 1e-9
     inside = (seconds + START_NS * 1e-9 >= start) & (seconds + START_NS * 1e-9 < end)
     q = theta(seconds[inside])
@@ -161,8 +168,11 @@ def independent_fit(times_ns, values, start, end):
 
 
 def rosbags_channels(path):
-    """{topic: (times ns, values (n, k))} read by rosbags: Float64 at log times, the
-    stamped ones at their header stamps, TimeReference's time_ref."""
+    """
+    Return {topic: (times ns, values (n, k))} as rosbags reads them.
+
+    Float64 at log times, the stamped ones at their header stamps, TimeReference's time_ref.
+    """
     from rosbags.highlevel import AnyReader
     from pathlib import Path
     out = {}

@@ -51,8 +51,10 @@ CDR_LE = 0x0100
 @dataclass(frozen=True)
 class ChannelSource:
     """
-    A vibration channel of a bag: ``name`` (topic, without its leading '/', and the axis),
-    ``unit``, the bag ``channel`` and ``axis`` (0-2, None for a Float64).
+    A vibration channel of a bag.
+
+    ``name`` (topic, without its leading '/', and the axis), ``unit``, the bag
+    ``channel`` and ``axis`` (0-2, None for a Float64).
     """
 
     name: str
@@ -73,8 +75,10 @@ class Samples:
 @dataclass
 class Keyphasor:
     """
-    A bag's keyphasor: its bag ``channel``, checked ``marks`` (times s after ``origin_ns``)
-    and, for a sampled tach, its samples' ``time_ns`` (log times) and ``problems``.
+    A bag's keyphasor.
+
+    Its bag ``channel``, checked ``marks`` (times s after ``origin_ns``), for a sampled
+    tach its samples' ``time_ns`` (log times), and ``problems``.
     """
 
     channel: object
@@ -133,7 +137,8 @@ def vibration_channels(bag, units=None, exclude=()):
         if channel.msg_type == FLOAT64:
             sources.append(ChannelSource(topic, unit, channel))
         else:
-            sources += [ChannelSource(f'{topic}/{a}', unit, channel, k) for k, a in enumerate(AXES)]
+            sources += [ChannelSource(f'{topic}/{a}', unit, channel, k)
+                        for k, a in enumerate(AXES)]
     unknown = sorted(set(units) - named)
     if unknown:
         raise BagError(f'{bag.path}: --channel-unit names {", ".join(unknown)}, no vibration '
@@ -216,7 +221,7 @@ def keyphasor_channel(bag, topic=None):
     found = [c for c in bag.channels.values() if c.topic.strip('/') == wanted]
     if not found and topic is None:
         found = [c for c in bag.channels.values() if c.topic.endswith('/' + wanted)]
-    where = f' (given with --keyphasor)' if topic else ' (name it with --keyphasor TOPIC)'
+    where = ' (given with --keyphasor)' if topic else ' (name it with --keyphasor TOPIC)'
     if len({c.topic for c in found}) > 1:
         raise BagError(f'{bag.path}: several keyphasor topics: '
                        f'{", ".join(sorted({c.topic for c in found}))}; choose one with '

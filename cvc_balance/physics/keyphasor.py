@@ -1,6 +1,7 @@
 """
-A once-per-revolution mark (keyphasor, tach) instead of an encoder: the angle, speed and
-steady stretches from its marks.
+A once-per-revolution mark (keyphasor, tach) instead of an encoder.
+
+The rotor angle, speed and steady stretches from its marks.
 
 A keyphasor sees one mark on the rotor once a turn (an optical pick-up on a reflective
 strip, a magnetic or proximity probe at a notch). Its marks are the times the rotor angle
@@ -11,9 +12,10 @@ Marks come from a sampled tach signal (:func:`signal_marks`: where it crosses a 
 each crossing timed by linear interpolation between the two samples around it, with a
 hysteresis band so noise near the threshold makes no extra mark) or one time per mark (a
 TimeReference). :func:`checked_marks` checks every period against its neighbours': a period
-about n = 2 or 3 times theirs lost n - 1 marks (put back, evenly: ``missed``); two periods
-that add up to one of theirs, one of them short, hold an extra mark (dropped: ``doubled``); any other period
-off by more than :data:`PERIOD_TOLERANCE` is ``irregular``: no angle or speed is given
+about n = 2 or 3 times theirs lost n - 1 marks (put back, evenly: ``missed``); two
+periods that add up to one of theirs, one of them short, hold an extra mark (dropped:
+``doubled``); any other period off by more than :data:`PERIOD_TOLERANCE` is
+``irregular``: no angle or speed is given
 inside it. So a bad mark is repaired, or leaves a gap, and is counted; it never becomes a
 wrong speed.
 
@@ -130,7 +132,7 @@ class Marks:
 
     def angle(self, time):
         """
-        Return the unwrapped angle (rad) at ``time`` (s): 2 pi k at mark k, linear between.
+        Return the unwrapped rotor angle at ``time`` (s), rad: 2 pi k at mark k, linear.
 
         NaN before the first mark, after the last and inside irregular periods.
         """
