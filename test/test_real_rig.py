@@ -85,7 +85,8 @@ def independent_1x(record, start, end):
     """
     Return (f Hz, amplitude counts, lag deg) over [start, end) s of a run, by plain fits.
 
-    f: the frequency whose sinusoid best fits the IR signal (least squares, 1 mHz grid);
+    f: the frequency whose sinusoid best fits the IR signal (least squares, a 50 mHz grid
+    then 1 mHz around the best);
     t0: the IR's 0 -> 1 steps (each halfway between its two samples) fitted to t0 + k / f;
     then least squares of the accelerometer on 1, cos, sin of 2 pi f (t - t0): the 1x
     peaks lag = atan2(b, a) after the mark.
@@ -95,13 +96,15 @@ def independent_1x(record, start, end):
     inside = (t >= start) & (t < end)
     t, ir = t[inside], np.asarray(record['ir_meas'], float)[inside]
     ac = np.asarray(record['ac_meas'], float)[inside]
-    residuals = []
-    grid = np.arange(40.0, 70.0, 0.001)
-    for f in grid:
-        design = np.column_stack([np.ones_like(t), np.cos(2 * np.pi * f * t),
-                                  np.sin(2 * np.pi * f * t)])
-        residuals.append(np.linalg.lstsq(design, ir, rcond=None)[1][0])
-    f = grid[int(np.argmin(residuals))]
+    def best(grid):
+        residuals = []
+        for f in grid:
+            design = np.column_stack([np.ones_like(t), np.cos(2 * np.pi * f * t),
+                                      np.sin(2 * np.pi * f * t)])
+            residuals.append(np.linalg.lstsq(design, ir, rcond=None)[1][0])
+        return grid[int(np.argmin(residuals))]
+    coarse = best(np.arange(40.0, 70.0, 0.05))
+    f = best(np.arange(coarse - 0.05, coarse + 0.05, 0.001))
     steps = t[1:][(ir[:-1] < 0.5) & (ir[1:] >= 0.5)] - 0.5 / rate
     turns = np.round((steps - steps[0]) * f)
     t0 = steps[0] + np.mean((steps - steps[0]) - turns / f)
