@@ -1,6 +1,8 @@
 """
-A real recording: a small balancing rig's IR tach and accelerometer, before and after its
-balance weight (docs/guide/real_data.md).
+A real recording: a small balancing rig's tach and accelerometer, before and after.
+
+Its IR tach and accelerometer, without and with its balance weight
+(docs/guide/real_data.md).
 
 Source: github.com/hstarmans/rotorbalancer, commit 7b7d24915e157335320b43085016d6d92906e491
 ("added measurements", 2021-07-01), licence GPL-3.0 (its LICENSE). A polygon-mirror motor
@@ -96,6 +98,7 @@ def independent_1x(record, start, end):
     inside = (t >= start) & (t < end)
     t, ir = t[inside], np.asarray(record['ir_meas'], float)[inside]
     ac = np.asarray(record['ac_meas'], float)[inside]
+
     def best(grid):
         residuals = []
         for f in grid:

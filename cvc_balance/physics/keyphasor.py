@@ -94,15 +94,14 @@ def signal_marks(time, values, edge='rising', threshold=None, hysteresis=HYSTERE
         raise ValueError(f'keyphasor threshold must be finite, got {threshold}')
     band = hysteresis * (high - low)
     above = (values - threshold) if edge == 'rising' else (threshold - values)
-    # -1 below the band, +1 above it, 0 inside; inside samples take the state before them.
-    state = np.where(above > band, 1, np.where(above < -band, -1, 0)).astype(np.int8)
-    index = np.arange(len(state))
-    last_decided = np.maximum.accumulate(np.where(state != 0, index, 0))
-    held = state[last_decided]
-    edges = np.flatnonzero((held[:-1] == -1) & (held[1:] == 1)) + 1
+    # The samples beyond the band on either side; an edge is one above it whose last such
+    # sample before was below it (samples inside the band change nothing).
+    decided = np.flatnonzero(np.abs(above) > band)
+    high_side = above[decided] > 0.0
+    edges = decided[1:][high_side[1:] & ~high_side[:-1]]
     # The crossing lies after the last sample below the threshold before the edge.
-    last_below = np.maximum.accumulate(np.where(above < 0.0, index, -1))
-    before = last_below[edges]
+    below = np.flatnonzero(above < 0.0)
+    before = below[np.searchsorted(below, edges) - 1]
     after = before + 1
     share = -above[before] / (above[after] - above[before])
     return time[before] + share * (time[after] - time[before])
@@ -226,7 +225,7 @@ def checked_marks(times, tolerance=PERIOD_TOLERANCE, neighbours=NEIGHBOURS):
     found = len(times)
     if found < 2:
         return Marks(times, np.zeros(max(found - 1, 0), bool), found)
-    doubled = 0
+    doubled, usual = 0, None
     while len(times) > 3:                       # an extra mark splits one period in two
         periods = np.diff(times)
         usual = _neighbours_median(periods, neighbours)
@@ -238,9 +237,10 @@ def checked_marks(times, tolerance=PERIOD_TOLERANCE, neighbours=NEIGHBOURS):
         if not extra.any():
             break
         doubled += int(extra.sum())
-        times = np.delete(times, np.flatnonzero(extra) + 1)
+        times, usual = np.delete(times, np.flatnonzero(extra) + 1), None
     periods = np.diff(times)
-    usual = _neighbours_median(periods, neighbours)
+    if usual is None:
+        usual = _neighbours_median(periods, neighbours)
     ratio = periods / usual
     turns = np.rint(ratio).astype(np.int64)
     lost = (turns >= 2) & (turns <= MAX_MISSED + 1) & \
@@ -260,14 +260,20 @@ def checked_marks(times, tolerance=PERIOD_TOLERANCE, neighbours=NEIGHBOURS):
 
 
 def _neighbours_median(periods, neighbours):
-    """Median of the ``neighbours`` periods either side of each (itself left out)."""
+    """
+    Median of the ``neighbours`` periods either side of each (itself left out).
+
+    At the ends, the periods beyond are the ones inside reflected (each end period's
+    neighbours are all on one side).
+    """
     n = len(periods)
     if n < 2:
         return periods.copy()
-    padded = np.concatenate([np.full(neighbours, np.nan), periods, np.full(neighbours, np.nan)])
-    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * neighbours + 1)
-    around = np.delete(windows, neighbours, axis=1)
-    return np.nanmedian(around, axis=1)
+    reach = min(neighbours, n - 1)
+    padded = np.pad(periods, reach, mode='reflect')
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * reach + 1)
+    around = np.sort(np.delete(windows, reach, axis=1), axis=1)
+    return 0.5 * (around[:, reach - 1] + around[:, reach])
 
 
 @dataclass(frozen=True)
