@@ -258,7 +258,10 @@ def test_readings_are_the_true_1x_and_an_independent_fit(rig):
 
 
 def test_a_time_reference_and_a_float64_keyphasor_give_the_same_readings(rig):
-    signal, marks = bag_readings(rig), bag_readings(rig, keyphasor='marks')
+    signal, marks = bag_readings(rig), bag_readings(rig, keyphasor='marks', threshold=2.5)
+    assert marks.problems == ['keyphasor /marks is sensor_msgs/msg/TimeReference (one message '
+                              'a mark): the threshold given applies to a sampled tach only; '
+                              'ignored']
     assert signal.keyphasor.marks.missed == 1 and signal.keyphasor.marks.doubled == 1
     assert marks.keyphasor.marks.missed == marks.keyphasor.marks.doubled == 0
     assert len(signal.segments) == len(marks.segments) == 2

@@ -263,6 +263,10 @@ def read_keyphasor(bag, topic=None, edge='rising', threshold=None):
         if rejected:
             problems.append(f'{channel.topic}: {rejected} messages not readable as '
                             'TimeReference; left out')
+        if threshold is not None:
+            problems.append(f'keyphasor {channel.topic} is {TIME_REFERENCE} (one message a '
+                            'mark): the threshold given applies to a sampled tach only; '
+                            'ignored')
         if not len(mark_ns):
             raise BagError(f'{bag.path}: keyphasor {channel.topic} has no readable message')
         time_ns, origin = None, int(mark_ns[0])
