@@ -494,7 +494,8 @@ class BalanceMonitor(Node):
                     f"{waited} on {topics.JOINT_STATES} or {topics.SPEED} (stale after " \
                     f"{self.params['stale_after']:g} s); {message}"
         if self._layout_error:
-            message += f'; last layout rejected: {self._layout_error}'
+            # In full under 'last rejected layout'; the headline stays one readable line.
+            message += f'; last layout rejected: {one_line(self._layout_error, 150)}'
         status.level, status.message = level, message
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         array = DiagnosticArray(status=statuses)
