@@ -51,7 +51,7 @@ def motion(t):
 
 
 def write_bag(path, true_layout, cells=True, seconds=None):
-    """A run of the declared layout, its cells reading ``true_layout`` (rosbags-serialised)."""
+    """Write a run of the declared layout, its cells reading ``true_layout`` (rosbags)."""
     seconds = seconds or SPEED / SPIN_UP + STEADY
     state_type, string_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
     wrench_type = 'geometry_msgs/msg/WrenchStamped'
@@ -119,7 +119,7 @@ def permissible_by_hand(layout):
 
 
 def grade_by_hand(planes, layout=DECLARED):
-    """The equivalent grade (mm/s): G times the worst plane's fraction of its share."""
+    """Return the equivalent grade (mm/s): G times the worst plane's fraction of its share."""
     return layout['balancing']['grade'] * max(
         abs(u) / share for u, share in zip(planes, permissible_by_hand(layout)))
 
@@ -151,7 +151,7 @@ def test_the_declared_layout_is_within_and_the_true_rotor_out_of_g_6_3():
 
 
 def test_replay_leads_with_the_measured_rotor(bags):
-    """replay's text: the measured verdict first, the layout's beside it, the difference."""
+    """Replay's text: the measured verdict first, the layout's beside it, the difference."""
     lines = cli('replay', bags['differs']).stdout.splitlines()
     true = by_hand(with_extra(DECLARED, EXTRA))
     measured = json.loads(cli('replay', bags['differs'], '--json').stdout)['segments'][0]

@@ -136,7 +136,7 @@ def segment_record(segment, identified=None):
 
 
 def _vector(vector, unit_scale, unit, known=True):
-    """A vector's amount, angle (deg, 0..360) and 95 % radius; null for what is not known."""
+    """Return a vector's amount, angle (deg, 0..360) and 95 % radius; null if not known."""
     if not known:
         return {unit: None, 'angle_deg': None, f'ci95_{unit}': None}
     ci = vector.ci95 * unit_scale if math.isfinite(vector.ci95) else None

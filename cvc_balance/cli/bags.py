@@ -150,7 +150,7 @@ def _replay(args):
 
 
 def _identified(args):
-    """The bag's identified segments ([IdentifiedSegment]), None without load cells."""
+    """Return the bag's identified segments ([IdentifiedSegment]), None without cells."""
     from cvc_balance.bag.identify_run import identify_bag
     from cvc_balance.bag.run_summary import has_load_cells
     if not has_load_cells(args.bag):
@@ -187,7 +187,7 @@ def _log_cells(logger, identified):
 
 
 def _rerun_logger(path, bag, every=10, identified=None):
-    """A RunLogger saving to ``path``, told each segment's verdict of record beforehand."""
+    """Return a RunLogger saving to ``path``, told each segment's verdict of record first."""
     from cvc_balance.bag.identify_run import segment_verdict
     from cvc_balance.view.rerun_log import open_recording, RunLogger
     evidence = {(s.layout.digest(), s.start_ns): segment_verdict(s) for s in identified or ()}

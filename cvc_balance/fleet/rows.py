@@ -7,9 +7,10 @@ segments, the segment's numbers, the two correction planes as ``plane_I_*`` and
 ``plane_II_*`` (the layout's), the verdict of record (``level``, ``verdict``,
 ``equivalent_grade``: the measured rotor's when its load cells can tell, ``verdict_source``
 says which) beside the layout's (``layout_*``), and the load cells' identification as
-``identified_*`` and ``residual_*`` (null without cells). Times are UTC timestamps (ns). Units as in the record: SI, g mm and
-degrees where the name says so. The schemas are fixed here, so every run of the tool
-writes the same columns and DuckDB, pandas or Spark read the table alike.
+``identified_*`` and ``residual_*`` (null without cells). Times are UTC timestamps (ns).
+Units as in the record: SI, g mm and degrees where the name says so. The schemas are fixed
+here, so every run of the tool writes the same columns and DuckDB, pandas or Spark read the
+table alike.
 """
 
 import pyarrow as pa

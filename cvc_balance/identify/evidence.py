@@ -127,7 +127,7 @@ class VerdictOfRecord:
 
     @property
     def disagreement_text(self):
-        """'the rotor is not what its layout says: ...' or '' when they agree."""
+        """Return 'the rotor is not what its layout says: ...', or '' when they agree."""
         if not self.disagreements:
             return ''
         text = 'the rotor is not what its layout says: ' + ', '.join(
@@ -136,24 +136,24 @@ class VerdictOfRecord:
 
     @property
     def statement(self):
-        """The verdict and its source, e.g. 'G 9.17 at ... OUT OF G 6.3 (measured by ...)'."""
+        """Return the verdict and its source: 'G 9.17 at ... OUT OF G 6.3 (measured by ...)'."""
         return f'{self.verdict.text} ({self.source_text})'
 
     @property
     def headline(self):
-        """The headline, e.g. 'ERROR: G 9.17 at ... OUT OF G 6.3 (measured by the load cells)'."""
+        """Return the headline: 'ERROR: G 9.17 at ... OUT OF G 6.3 (measured by the cells)'."""
         return f'{self.level}: {self.statement}'
 
     @property
     def text(self):
-        """The statement and, when rotor and layout disagree, how (one line, no level)."""
+        """Return the statement and, when rotor and layout disagree, how (one line, no level)."""
         if self.disagreements:
             return f'{self.statement}; {self.disagreement_text}'
         return self.statement
 
     @property
     def layout_text(self):
-        """What the layout expects, e.g. 'the layout expects OK: G 2.5 at ... WITHIN G 6.3'."""
+        """Return what the layout expects: 'the layout expects OK: G 2.5 at ... WITHIN G 6.3'."""
         return f'the layout expects {self.layout.level}: {self.layout.text}'
 
     def record(self):
@@ -285,7 +285,7 @@ def explain(model, diff):
 
 
 def _target(model, diff):
-    """The residual as a vector (per plane, or static) and its 95 % radius; None if none."""
+    """Return the residual as a vector (per plane, or static) and its 95 % radius, or None."""
     if diff.planes:
         vector = [v.value for _, v in diff.planes]
         noise = math.sqrt(sum(v.ci95 ** 2 for _, v in diff.planes))
@@ -297,7 +297,7 @@ def _target(model, diff):
 
 
 def _effect(model, moment, z):
-    """The residual vector a mass moment (kg m, complex) at ``z`` adds (planes, or static)."""
+    """Return the residual a mass moment (kg m, complex) at ``z`` adds (planes, or static)."""
     planes = model.layout.correction_planes()
     if planes is None:
         return [moment]

@@ -78,7 +78,7 @@ class LoadCells:
     @property
     def estimate(self):
         """
-        The latest fit, for the verdict of record; None when no cell has read yet.
+        Return the latest fit, for the verdict of record; None when no cell has read yet.
 
         Before the first whole revolution: an estimate that cannot tell (the layout's
         verdict then stands, labelled so).

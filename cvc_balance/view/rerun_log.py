@@ -373,7 +373,7 @@ class RunLogger:
 
     def _verdict_text(self, verdict, record=None):
         """
-        The verdict panel (Markdown): the verdict of record and its source first.
+        Return the verdict panel (Markdown): the verdict of record and its source first.
 
         Measured: the measured rotor's grade and corrections, what the layout expects,
         and where the rotor is not what its layout says. Else the layout's, labelled.
