@@ -196,7 +196,8 @@ def test_node_judges_at_the_service_speed_goes_stale_and_logs_each_change_once(
     assert float(values['achieved grade [mm/s]']) == pytest.approx(
         solve['equivalent_grade'], rel=1e-5)
     assert solve['level'] == values['verdict level'] == 'ERROR'
-    assert values['verdict'].endswith('OUT OF G 6.3')
+    assert values['verdict'].endswith('OUT OF G 6.3 (from the layout: no load cells)')
+    assert values['verdict source'] == 'layout'
     # Input stops: STALE within stale_after + one period, the verdict still said.
     assert wait_for_diagnostics(probe, lambda s, v: s.level == DiagnosticStatus.STALE,
                                 timeout=3.0), node.log()

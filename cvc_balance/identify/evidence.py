@@ -66,12 +66,18 @@ class Disagreement:
         """Return the residual over the permissible share."""
         return abs(self.residual) / self.permissible
 
-    def describe(self):
-        """One phrase for people, e.g. 'plane II +149160 g mm at 130.6 deg'."""
+    def describe(self, brief=False):
+        """
+        Return one phrase for people, e.g. 'plane II +149160 g mm at 130.6 deg (...)'.
+
+        ``brief``: without the 95 % radius and the share (a status line's length).
+        """
         where = 'static unbalance' if self.plane == 'static' else f'plane {self.plane}'
-        return (f'{where} +{g_mm(abs(self.residual)):.0f} g mm at '
-                f'{degrees_360(cmath.phase(self.residual)):.1f} deg '
-                f'(95 % radius {g_mm(self.ci95):.0f} g mm; {self.fraction:.2f} of its '
+        text = (f'{where} +{g_mm(abs(self.residual)):.0f} g mm at '
+                f'{degrees_360(cmath.phase(self.residual)):.1f} deg')
+        if brief:
+            return text
+        return (f'{text} (95 % radius {g_mm(self.ci95):.0f} g mm; {self.fraction:.2f} of its '
                 f'permissible {g_mm(self.permissible):.0f} g mm)')
 
     def record(self):
@@ -146,9 +152,15 @@ class VerdictOfRecord:
 
     @property
     def text(self):
-        """Return the statement and, when rotor and layout disagree, how (one line, no level)."""
+        """
+        Return the statement and, when rotor and layout disagree, where (one line, no level).
+
+        The short form a status line holds; :attr:`disagreement_text` has the radii, the
+        shares and the explanation.
+        """
         if self.disagreements:
-            return f'{self.statement}; {self.disagreement_text}'
+            return (f'{self.statement}; the rotor is not what its layout says: '
+                    + ', '.join(d.describe(brief=True) for d in self.disagreements))
         return self.statement
 
     @property

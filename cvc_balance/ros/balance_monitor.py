@@ -566,6 +566,9 @@ class BalanceMonitor(Node):
                   'grade [mm/s]': grade, 'verdict level': of_record.level,
                   'verdict': of_record.statement,
                   'verdict source': of_record.source,
+                  **{f'not as the layout says: {d.plane}': d.describe()
+                     for d in of_record.disagreements},
+                  'what would explain it': of_record.explanation or '',
                   'achieved grade [mm/s]': of_record.equivalent_grade
                   if of_record.equivalent_grade is not None else '',
                   'layout verdict level': verdict.level, 'layout verdict': verdict.text}

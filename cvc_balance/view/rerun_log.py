@@ -75,6 +75,9 @@ LOG_LEVELS = {assessment.OK: 'INFO', assessment.WARN: 'WARN', assessment.ERROR: 
               assessment.NOT_JUDGED: 'INFO'}
 PLANE_COLOURS = {'plane_I': (80, 170, 255), 'plane_II': (255, 120, 200),
                  'static': (80, 170, 255)}
+MEASURED_PLANE_COLOURS = {'plane_I': (20, 90, 230), 'plane_II': (200, 30, 130),
+                          'static': (20, 90, 230)}
+"""A plane's unbalance as the load cells measure it: its layout colour, deeper."""
 COMPONENT_COLOUR = (120, 135, 160)
 CHANGED_COLOUR = (255, 215, 0)
 CORRECTION_COLOUR = (60, 200, 90)
@@ -283,14 +286,13 @@ class RunLogger:
                         static=True)
         for key in planes:
             label = 'static' if key == 'static' else f'plane {key[6:]}'
-            # The layout's paler and thinner; the load cells' (when they can tell) full.
-            pale = tuple((c + 255) // 2 for c in PLANE_COLOURS[key])
+            # The load cells' (drawn when they can tell) deeper and thicker than the layout's.
             rec.log(f'plots/unbalance/{key}', rr.SeriesLines(
-                names=[f'{label} layout [U / permissible]'], colors=[pale],
-                widths=[1.5]), static=True)
+                names=[f'{label} layout [U / permissible]'], colors=[PLANE_COLOURS[key]],
+                widths=[2.0]), static=True)
             rec.log(f'plots/unbalance/measured_{key}', rr.SeriesLines(
-                names=[f'{label} measured [U / permissible]'], colors=[PLANE_COLOURS[key]],
-                widths=[3.0]), static=True)
+                names=[f'{label} measured [U / permissible]'],
+                colors=[MEASURED_PLANE_COLOURS[key]], widths=[3.0]), static=True)
             rec.log(f'polar/{key}/grid', _polar_grid(), static=True)
             rec.log(f'polar/{key}/grid_labels', _polar_grid_labels(), static=True)
         for name in supports:
