@@ -58,6 +58,8 @@ from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import BagRecorder
 
 THROTTLE_S = 1.0
+STATUS_CHARACTERS = 560
+"""A status message longer than this is cut (the values hold every part in full)."""
 LEVELS = {assessment.OK: DiagnosticStatus.OK, assessment.NOT_JUDGED: DiagnosticStatus.OK,
           assessment.WARN: DiagnosticStatus.WARN, assessment.ERROR: DiagnosticStatus.ERROR}
 LEVEL_NAMES = {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
@@ -496,7 +498,8 @@ class BalanceMonitor(Node):
         if self._layout_error:
             # In full under 'last rejected layout'; the headline stays one readable line.
             message += f'; last layout rejected: {one_line(self._layout_error, 150)}'
-        status.level, status.message = level, message
+        # One readable line: every part in full is in the values (STATUS_CHARACTERS).
+        status.level, status.message = level, one_line(message, STATUS_CHARACTERS)
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         array = DiagnosticArray(status=statuses)
         array.header.stamp = self.get_clock().now().to_msg()
