@@ -639,7 +639,9 @@ def test_fuzzed_foreign_bags_give_a_bag_error_or_what_can_be_read(tmp_path):
             continue
         assert len(motion.stamp) == len(motion.angle) == len(motion.omega)
         outcomes['read'] += 1
-    assert min(outcomes.values()) > 50, outcomes
+    # Both outcomes drawn (the reader goes on past damaged records since issue 24: errors
+    # went from over 50 to 34 of 600).
+    assert min(outcomes.values()) > 20, outcomes
 
 
 def test_fast_path_gathers_a_chunk_at_once(monkeypatch, tmp_path):

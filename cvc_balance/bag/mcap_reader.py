@@ -20,13 +20,20 @@ all messages of a chunk at once.
 A file that ends inside a record (a recording killed mid-chunk), a chunk that
 does not decompress or fails its CRC, a message index that does not point at
 its channel's messages: each is reported in ``Bag.problems`` and the rest is
-still used.
+still used. A damaged record (a flipped byte in its length, or in its fields) does
+not end the walk: a record whose own fields say its length (a header, schema,
+channel, metadata, or a chunk whose CRC holds) is read by them, else the walk
+goes on at the next whole record (fields filling its length exactly; a chunk's
+CRC holding), and chunks that the summary's chunk indexes list are read where they
+say, as the ``mcap`` library's indexed reader and rosbags read them: one damaged
+byte costs at most its own record, never the chunks after it.
 """
 
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 import mmap
 import os
+import re
 import struct
 import threading
 
@@ -42,13 +49,19 @@ except ImportError:                                  # pragma: no cover
 
 MAGIC = b'\x89MCAP0\r\n'
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
-OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x06, 0x07, 0x0F
+OP_CHUNK, OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_ATTACHMENT = 0x06, 0x07, 0x08, 0x09
+OP_METADATA, OP_METADATA_INDEX, OP_DATA_END = 0x0C, 0x0D, 0x0F
+COMPRESSIONS = ('', 'zstd', 'lz4')
+"""Chunk compressions this reader decompresses."""
 MESSAGE_HEADER = 31
 """Bytes of a message record before its data: opcode, length, channel, sequence, times."""
 AHEAD = 4
 """Chunks decompressed ahead of the one being parsed."""
 _RECORD = struct.Struct('<BQ')
 _U64 = struct.Struct('<Q')
+_U32 = struct.Struct('<I')
+_RESYNC = re.compile(b'[\x03\x04\x06\x0c]')
+"""Opcodes the walk may go on at after a damaged record: schema, channel, chunk, metadata."""
 _local = threading.local()   # a decompressor per thread
 
 
@@ -84,6 +97,7 @@ class ChunkInfo:
     crc: int
     indexes: dict = None
     walked: bool = False
+    end: int = 0             # where its record ends in the file
 
 
 def select_channel(channels, topic, msg_type, where, option=None, exact=False):
@@ -134,10 +148,20 @@ class Bag:
             raise BagError(f'{self.path}: cannot read bag: {error.strerror}') from None
         self.problems = []
         self.schemas, self.channels, self.chunks = {}, {}, []
+        self.header = None          # the Header record's bytes (None: not readable)
+        self.definitions = {}       # (opcode, id) -> bytes of its Schema or Channel record
+        self.metadata = []          # Metadata records: (offset, name, {key: value}, bytes)
+        self.attachments = []       # Attachment records: (offset, length)
+        self.finished = False       # the walk reached the footer
+        self.summary_records = Counter()    # opcode -> records of the summary
+        self._indexed_chunks = []   # offsets of chunks the summary's chunk indexes give
+        self._indexed_metadata = []  # offsets of metadata records the summary indexes
         self._loose = []           # (channel, offset in file) of messages outside chunks
+        self._mended = {}          # offset -> length of records whose length field is damaged
         self._unreadable = set()   # chunks already reported
         self._summary_channels = False
         self._walk()
+        self._read_indexed()
         self._find_channels_in_chunks()
         for channel in self.channels.values():    # a schema may come after its channel
             if not channel.msg_type:
@@ -150,36 +174,94 @@ class Bag:
         if data[:8] != MAGIC:
             raise BagError(f'{self.path}: not an MCAP file (no MCAP magic at the start)')
         position, size = 8, len(data)
-        data_end = finished = False
+        data_end = False
         indexing = None   # the chunk that message index records now follow
         while position < size:
-            if position + 9 > size:
-                self._ended(data_end, f'file ends inside a record header at byte {position}')
-                break
-            opcode, length = _RECORD.unpack_from(data, position)
-            start = position + 9
-            if start + length > size:
-                self._ended(data_end, f'file ends inside a record (opcode 0x{opcode:02x}) at '
-                            f'byte {position} of {size}')
-                break
-            try:
-                if data_end:
-                    self._summary_record(opcode, start)
+            torn, opcode, length = self._framing(position)
+            damage = None
+            if torn is None:
+                start = position + 9
+                try:
+                    if data_end:
+                        self._summary_record(opcode, start, length)
+                    else:
+                        indexing = self._record(opcode, start, length, indexing)
+                except (struct.error, UnicodeDecodeError, ValueError) as error:
+                    damage = f'corrupt {"summary" if data_end else "record"} (opcode ' \
+                             f'0x{opcode:02x}) at byte {position}: {error}'
+            if torn is not None or damage is not None:
+                resume = None if data_end else self._resume(position, length)
+                if resume is None:
+                    if torn is not None:
+                        self._ended(data_end, torn)
+                    else:
+                        self.problems.append(f'{damage}; stopped reading there')
+                    break
+                if indexing is not None:      # its message indexes may be part gone: walked
+                    indexing.indexes, indexing.walked = None, False
+                    indexing = None
+                damage = damage or f'record (opcode 0x{opcode:02x}) at byte {position} runs ' \
+                    'past the end of the file'
+                if resume == position:
+                    self.problems.append(f'{damage}: its length field ({length}) is damaged, '
+                                         f'its fields give {self._mended[position]}: read by '
+                                         'them')
                 else:
-                    indexing = self._record(opcode, start, length, indexing)
-            except (struct.error, UnicodeDecodeError, ValueError) as error:
-                part = 'summary' if data_end else 'record'
-                self.problems.append(f'corrupt {part} (opcode 0x{opcode:02x}) at byte '
-                                     f'{position}: {error}; stopped reading there')
-                finished = True
-                break
+                    self.problems.append(f'{damage}: {resume - position} bytes skipped to the '
+                                         f'next whole record at byte {resume}')
+                position = resume
+                continue
             position = start + length
             if opcode == OP_FOOTER:
-                finished = True
+                self.finished = True
                 break
             data_end = data_end or opcode == OP_DATA_END
-        if not finished and not data_end and not self.problems:
+        if not self.finished and not data_end and not self.problems:
             self.problems.append('file has no end of data (truncated recording?)')
+
+    def _framing(self, position):
+        """
+        Return (torn, opcode, length) of the record at ``position``.
+
+        ``torn`` is None, or where the file ends inside the record. A record whose
+        length field was found damaged (:meth:`_resume`) gets the length its fields give.
+        """
+        data, size = self._bytes, len(self._bytes)
+        if position + 9 > size:
+            return f'file ends inside a record header at byte {position}', None, 0
+        opcode, length = _RECORD.unpack_from(data, position)
+        length = self._mended.get(position, length)
+        if position + 9 + length > size:
+            return (f'file ends inside a record (opcode 0x{opcode:02x}) at byte {position} of '
+                    f'{size}'), opcode, length
+        return None, opcode, length
+
+    def _resume(self, position, length):
+        """
+        Return where the walk goes on after the damaged record at ``position`` (None: nowhere).
+
+        ``position`` itself when the record's own fields give a length other than its
+        length field's (remembered for :meth:`_framing`), else the next whole record.
+        """
+        derived = _derived_length(self._bytes, position)
+        if derived is not None and derived != length and position not in self._mended:
+            self._mended[position] = derived
+            return position
+        return self._next_whole_record(position + 1)
+
+    def _next_whole_record(self, start):
+        """Return where the first whole record at or after ``start`` begins (None: none)."""
+        data, size = self._bytes, len(self._bytes)
+        if start >= size:
+            return None
+        for match in _RESYNC.finditer(data, start):
+            at = match.start()
+            if at + 9 > size:
+                return None
+            length, = _U64.unpack_from(data, at + 1)
+            if length <= size - at - 9 and _derived_length(data, at) == length:
+                return at
+        return None
 
     def _ended(self, data_end, where):
         if data_end:
@@ -191,16 +273,13 @@ class Bag:
         """Take one data-section record; return the chunk later message indexes belong to."""
         data = self._bytes
         if opcode in (OP_SCHEMA, OP_CHANNEL):
-            self._definition(data, opcode, start)
+            self._definition(data, opcode, start, length)
         elif opcode == OP_CHUNK:
-            size, crc = struct.unpack_from('<QI', data, start + 16)
-            compression, position = _string(data, start + 28)
-            records_length, = _U64.unpack_from(data, position)
-            if position + 8 + records_length > start + length:
+            chunk = _chunk_at(data, start - 9, start + length)
+            if chunk is None:
                 raise ValueError('chunk data beyond its record')
-            records = memoryview(data)[position + 8:position + 8 + records_length]
-            self.chunks.append(ChunkInfo(start - 9, compression, records, size, crc))
-            return self.chunks[-1]
+            self.chunks.append(chunk)
+            return chunk
         elif opcode == OP_MESSAGE_INDEX and indexing is not None:
             channel_id, body = struct.unpack_from('<HI', data, start)
             if body % 16 or 6 + body > length:
@@ -217,22 +296,77 @@ class Bag:
             if length >= MESSAGE_HEADER - 9:
                 channel_id, = struct.unpack_from('<H', data, start)
                 self._loose.append((channel_id, start - 9))
+        elif opcode == OP_HEADER:
+            _string(data, _string(data, start)[1])         # profile, library: readable
+            self.header = bytes(data[start - 9:start + length])
+        elif opcode == OP_METADATA:
+            self._metadata(start - 9, start + length)
+        elif opcode == OP_ATTACHMENT:
+            self.attachments.append((start - 9, 9 + length))
         elif not OP_HEADER <= opcode <= OP_DATA_END:
             return indexing        # a kind this reader does not know: skipped, nothing ends
         return None
 
-    def _summary_record(self, opcode, start):
-        if opcode in (OP_SCHEMA, OP_CHANNEL):
-            self._definition(self._bytes, opcode, start)
-            self._summary_channels |= opcode == OP_CHANNEL
+    def _metadata(self, offset, end):
+        """Register the Metadata record at ``offset`` (ending at ``end``)."""
+        name, position = _string(self._bytes, offset + 9)
+        values, _ = _string_map(self._bytes, position, end)
+        self.metadata.append((offset, name, values, bytes(self._bytes[offset:end])))
 
-    def _definition(self, data, opcode, start):
+    def _summary_record(self, opcode, start, length):
+        if opcode in (OP_SCHEMA, OP_CHANNEL):
+            self._definition(self._bytes, opcode, start, length)
+            self._summary_channels |= opcode == OP_CHANNEL
+        elif opcode == OP_CHUNK_INDEX:
+            self._indexed_chunks.append(_U64.unpack_from(self._bytes, start + 16)[0])
+        elif opcode == OP_METADATA_INDEX:
+            self._indexed_metadata.append(struct.unpack_from('<QQ', self._bytes, start))
+        self.summary_records[opcode] += 1
+
+    def _read_indexed(self):
+        """
+        Read the chunks and metadata records the summary lists that the walk did not find.
+
+        Found where the summary's indexes say, as the ``mcap`` library's indexed reader
+        finds them (their record headers are not needed); a chunk only if its CRC holds.
+        """
+        data, size = self._bytes, len(self._bytes)
+        known = {chunk.offset for chunk in self.chunks}
+        found = 0
+        for offset in self._indexed_chunks:
+            if offset in known or not 8 <= offset < size:
+                continue
+            chunk = _chunk_at(data, offset, size, check=True)
+            if chunk is not None:
+                self.chunks.append(chunk)
+                known.add(offset)
+                found += 1
+        if found:
+            self.chunks.sort(key=lambda c: c.offset)
+            self.problems.append(f'{found} chunks read where the summary\'s chunk indexes '
+                                 'put them (the walk did not reach them whole)')
+            spans = [(c.offset, c.end) for c in self.chunks]
+            self._loose = [(c, o) for c, o in self._loose
+                           if not any(lo <= o < hi for lo, hi in spans)]
+        seen = {offset for offset, *_ in self.metadata}
+        for offset, length in self._indexed_metadata:
+            if offset not in seen and 8 <= offset and offset + length <= size:
+                try:
+                    self._metadata(offset, offset + length)
+                    seen.add(offset)
+                except (struct.error, UnicodeDecodeError, ValueError):
+                    pass
+        self.metadata.sort(key=lambda m: m[0])
+
+    def _definition(self, data, opcode, start, length):
         """Register a Schema or Channel record starting (after its opcode and length) here."""
         if opcode == OP_SCHEMA:
             schema_id, = struct.unpack_from('<H', data, start)
             name, _ = _string(data, start + 2)
             if schema_id:                            # 0: no schema, by the specification
                 self.schemas[schema_id] = name
+                self.definitions.setdefault((opcode, schema_id),
+                                            bytes(data[start - 9:start + length]))
             return
         channel_id, schema_id = struct.unpack_from('<HH', data, start)
         topic, position = _string(data, start + 4)
@@ -240,6 +374,7 @@ class Bag:
         self.channels[channel_id] = ChannelInfo(channel_id, topic,
                                                 self.schemas.get(schema_id, ''), encoding,
                                                 schema_id)
+        self.definitions.setdefault((opcode, channel_id), bytes(data[start - 9:start + length]))
 
     def _find_channels_in_chunks(self):
         """
@@ -281,10 +416,10 @@ class Bag:
             self.problems.append(f'chunk at byte {chunk.offset}: a record runs past the '
                                  f'chunk\'s end at byte {end} of its {len(buffer)}; the rest '
                                  'of the chunk skipped')
-        for offset, opcode in zip(offsets.tolist(), opcodes.tolist()):
+        for offset, opcode, length in zip(offsets.tolist(), opcodes.tolist(), lengths.tolist()):
             if opcode in (OP_SCHEMA, OP_CHANNEL):
                 try:
-                    self._definition(records, opcode, offset + 9)
+                    self._definition(records, opcode, offset + 9, length)
                 except (struct.error, UnicodeDecodeError, ValueError) as error:
                     self.problems.append(f'chunk at byte {chunk.offset}: corrupt record '
                                          f'(opcode 0x{opcode}) at {offset}: {error}; skipped')
@@ -414,11 +549,95 @@ def _decode(chunk):
     return records, None
 
 
-def _string(data, position):
-    length, = struct.unpack_from('<I', data, position)
-    if position + 4 + length > len(data):
+def _string(data, position, end=None):
+    length, = _U32.unpack_from(data, position)
+    if position + 4 + length > (len(data) if end is None else end):
         raise ValueError('string beyond the record')
     return bytes(data[position + 4:position + 4 + length]).decode('utf-8'), position + 4 + length
+
+
+def _string_map(data, position, end):
+    """Return ({key: value}, end) of a map<string, string> at ``position`` within ``end``."""
+    length, = _U32.unpack_from(data, position)
+    position += 4
+    stop = position + length
+    if stop > end:
+        raise ValueError('map beyond the record')
+    values = {}
+    while position < stop:
+        key, position = _string(data, position, stop)
+        values[key], position = _string(data, position, stop)
+    return values, stop
+
+
+def _chunk_at(data, offset, end, check=False):
+    """
+    Return the ChunkInfo of the chunk record at ``offset`` (None if it does not fit ``end``).
+
+    Its fields are read after the opcode and length (which are not used: the chunk's
+    records say its length). ``check``: None unless its records decompress and their
+    CRC holds (a chunk found by a chunk index or by looking for one).
+    """
+    try:
+        size, crc = struct.unpack_from('<QI', data, offset + 25)
+        compression, position = _string(data, offset + 37, end)
+        records_length, = _U64.unpack_from(data, position)
+    except (struct.error, UnicodeDecodeError, ValueError):
+        if check:
+            return None
+        raise
+    stop = position + 8 + records_length
+    if stop > end:
+        return None
+    chunk = ChunkInfo(offset, compression, memoryview(data)[position + 8:stop], size, crc,
+                      end=stop)
+    if check:
+        if compression not in COMPRESSIONS:
+            return None
+        records, error = _decode(chunk)
+        if error is not None or (not crc and record_table(
+                np.frombuffer(records, np.uint8))[3] != len(records)):
+            return None
+    return chunk
+
+
+def _derived_length(data, offset):
+    """
+    Return the length of the record at ``offset`` as its own fields give it, or None.
+
+    For the kinds whose fields fill their record exactly (header, schema, channel,
+    metadata) when they do, as readable text; for a chunk when its records decompress
+    and their CRC holds. None for other kinds and for anything that does not fit.
+    """
+    size = len(data)
+    opcode = data[offset]
+    body = offset + 9
+    try:
+        if opcode == OP_CHUNK:
+            chunk = _chunk_at(data, offset, size, check=True)
+            return None if chunk is None else chunk.end - body
+        if opcode == OP_HEADER:
+            _, position = _string(data, body)
+            _, position = _string(data, position)
+        elif opcode == OP_SCHEMA:
+            _, position = _string(data, body + 2)
+            _, position = _string(data, position)
+            length, = _U32.unpack_from(data, position)
+            position += 4 + length
+        elif opcode == OP_CHANNEL:
+            _, position = _string(data, body + 4)
+            _, position = _string(data, position)
+            _, position = _string_map(data, position, size)
+        elif opcode == OP_METADATA:
+            name, position = _string(data, body)
+            _, position = _string_map(data, position, size)
+            if not name:
+                return None
+        else:
+            return None
+    except (struct.error, UnicodeDecodeError, ValueError):
+        return None
+    return position - body if position <= size else None
 
 
 def _points_at_messages(buffer, offsets, channel_id):
