@@ -75,6 +75,9 @@ def test_a_cut_recording_is_read_by_every_reader_after_reindex(cut, tmp_path):
             list(make_reader(stream).iter_messages())
     report, = reindex(path)
     assert not report.already_whole and report.messages == len(expected)
+    assert path.read_bytes() == data[:at]                 # the bag itself is left as it was
+    path = Path(report.output)
+    assert path == tmp_path / 'killed.reindexed.mcap'
     with open(path, 'rb') as stream:
         got = [(c.id, m.log_time, bytes(m.data))
                for _, c, m in make_reader(stream, validate_crcs=True).iter_messages(
@@ -93,8 +96,9 @@ def test_a_whole_bag_is_left_alone(tmp_path):
     path = tmp_path / 'whole.mcap'
     shutil.copy(SOURCE, path)
     report, = reindex(path)
-    assert report.already_whole
+    assert report.already_whole and report.output == ''
     assert path.read_bytes() == SOURCE.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['whole.mcap']
 
 
 def test_a_killed_directory_gets_its_metadata_back(tmp_path):
@@ -112,7 +116,9 @@ def test_a_killed_directory_gets_its_metadata_back(tmp_path):
                          capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     assert f'{len(expected)} messages' in run.stdout
-    with Rosbag2Reader(directory) as reader:          # reads metadata.yaml, then the file
+    assert f'written to {tmp_path / "run.reindexed" / "run_0.mcap"}' in run.stdout
+    assert not (directory / 'metadata.yaml').exists()    # the bag itself is left as it was
+    with Rosbag2Reader(tmp_path / 'run.reindexed') as reader:    # metadata.yaml, the file
         assert reader.message_count == len(expected)
         assert sum(1 for _ in reader.messages()) == len(expected)
 

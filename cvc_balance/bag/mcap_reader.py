@@ -433,6 +433,15 @@ class Bag:
         """Report a problem found while reading."""
         self.problems.append(problem)
 
+    @property
+    def data(self):
+        """Return the file's bytes (mapped)."""
+        return self._bytes
+
+    def loose_messages(self):
+        """Return [(channel id, offset in the file)] of the message records outside chunks."""
+        return list(self._loose)
+
     def topics(self):
         """Return {topic: message type} of the bag's channels."""
         return {c.topic: c.msg_type for c in self.channels.values()}
@@ -457,7 +466,7 @@ class Bag:
                 number = next(numbers, None)
                 if number is None:
                     break
-                ahead.append((number, pool().submit(_decode, self.chunks[number])))
+                ahead.append((number, pool().submit(decode_chunk, self.chunks[number])))
             if not ahead:
                 return
             number, job = ahead.popleft()
@@ -524,7 +533,7 @@ class Bag:
         return out
 
 
-def _decode(chunk):
+def decode_chunk(chunk):
     """Return (records, None) of a chunk, decompressed and checked, or (None, error)."""
     try:
         if chunk.compression == '':
@@ -594,7 +603,7 @@ def _chunk_at(data, offset, end, check=False):
     if check:
         if compression not in COMPRESSIONS:
             return None
-        records, error = _decode(chunk)
+        records, error = decode_chunk(chunk)
         if error is not None or (not crc and record_table(
                 np.frombuffer(records, np.uint8))[3] != len(records)):
             return None

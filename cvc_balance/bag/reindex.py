@@ -1,38 +1,59 @@
 """
-``cvc-balance reindex BAG``: give a killed recording back its summary, as ``ros2 bag reindex``.
+``cvc-balance reindex BAG``: a damaged or killed recording mended, never at the cost of a message.
 
 A recording killed by SIGKILL or a power cut ends inside a chunk, with no summary and no
-footer: this project's reader reads it up to its last whole chunk (replay does that on the
-fly), but rosbags and the ``mcap`` library's indexed reader read nothing. Reindexing keeps
-the file's bytes up to the end of its last whole chunk (with that chunk's message indexes;
-a chunk whose CRC fails is kept too and reported), drops the torn record after it, and
-appends what a finished file ends with: DataEnd, the summary (schemas and channels,
-statistics, a chunk index per chunk, summary offsets) and the footer. A rosbag2 directory
-has each of its MCAP files reindexed and its ``metadata.yaml`` written again (from the
-files: topics, types, offered QoS, counts, times). The result is written under a temporary
-name and moved onto the original (or onto ``-o``) only when complete.
+footer: rosbags and the ``mcap`` library's indexed reader then read nothing. A byte
+flipped in a record's length field stops a reader that walks the file. Reindexing reads
+the bag with this project's reader (:class:`~cvc_balance.bag.mcap_reader.Bag`: every
+chunk whose CRC holds, past damaged records) and writes a new file of what it read: the
+header, every Metadata record, the schemas and channels, each readable chunk as it was
+compressed (its message indexes made from its records), messages found outside chunks
+gathered into chunks of their own, attachments; then DataEnd, the summary (schemas,
+channels, statistics, metadata, attachment and chunk indexes, summary offsets) and the
+footer. A chunk that fails its CRC or does not decompress is not copied (said).
+
+Nothing is lost: the result goes beside the bag (``run.mcap`` -> ``run.reindexed.mcap``,
+a rosbag2 directory ``run`` -> ``run.reindexed``; a name not taken), or to ``-o``, or
+over the bag only with ``in_place``; and it is refused, the bag left as it is, when a
+standard reader (the ``mcap`` library's indexed reader with CRCs checked, rosbags) reads
+more messages of a topic from the original than the result keeps, or when the result
+read back by the ``mcap`` library does not give what was written. A bag that is already
+whole (no damage, a complete summary) is not written again.
+
+A rosbag2 directory has each of its MCAP files reindexed and its ``metadata.yaml`` made
+again (from the files: topics, types, offered QoS, counts, times), keeping the old one's
+``custom_data`` (else that of the files' ``cvc_balance`` Metadata record).
 """
 
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass, field
-import mmap
-import os
 from pathlib import Path
 import struct
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import ChunkIndex, DataEnd, Footer, MessageIndex, Statistics, SummaryOffset
+from mcap.records import (AttachmentIndex, ChunkIndex, DataEnd, Footer, Header,
+                          MessageIndex, MetadataIndex, Statistics, SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
+import numpy as np
 import yaml
 
-from cvc_balance.bag.mcap_reader import BagError, crc32
+from cvc_balance.bag.mcap_reader import (Bag, BagError, column, decode_chunk, MESSAGE_HEADER,
+                                         OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, record_table)
 from cvc_balance.bag.mcap_writer import TopicWritten
-from cvc_balance.bag.rosbag2 import METADATA, metadata_yaml
-from cvc_balance.files import replaced_when_done
+from cvc_balance.bag.rosbag2 import CUSTOM_DATA_RECORD, METADATA, metadata_yaml
+from cvc_balance.files import created_when_done, replaced_when_done
 
-_RECORD = struct.Struct('<BQ')
-_STRING = struct.Struct('<I')
+LOOSE_CHUNK = 1 << 20
+"""Bytes of messages found outside chunks gathered into one (uncompressed) chunk."""
+SUFFIX = '.reindexed'
+"""Put before a file's suffix (or after a directory's name) for the result beside it."""
+_LIBRARY = 'cvc_balance reindex'
+
+
+class RepairRefused(BagError):
+    """A repair that would keep fewer messages than a standard reader reads; says which."""
 
 
 @dataclass
@@ -40,53 +61,133 @@ class Reindexed:
     """What reindexing a file found and wrote."""
 
     path: str
-    kept_bytes: int = 0
-    dropped_bytes: int = 0
+    output: str = ''              # where the result went ('' when nothing was written)
     chunks: int = 0
     messages: int = 0
+    dropped_chunks: int = 0
     problems: list = field(default_factory=list)
     already_whole: bool = False
     topics: list = field(default_factory=list)     # [TopicWritten]
     times: tuple = (None, None)
+    custom_data: dict = field(default_factory=dict)
+    readers: dict = field(default_factory=dict)    # reader -> messages it reads of the original
 
 
-def reindex(path, output=None):
+def beside(path):
+    """Return the default output of reindexing ``path``: run.mcap -> run.reindexed.mcap."""
+    path = Path(path)
+    if path.is_dir():
+        return path.with_name(path.name + SUFFIX)
+    return path.with_name(path.stem + SUFFIX + path.suffix)
+
+
+def reindex(path, output=None, in_place=False):
     """
     Reindex the bag at ``path`` (a .mcap file or rosbag2 directory); return [Reindexed].
 
-    ``output``: where to write the result (default: over ``path``, once complete).
+    The result goes to ``output``, or over ``path`` with ``in_place``, or else beside
+    it under a name not taken (:func:`beside`; ``Reindexed.output`` says which). Raises
+    :class:`RepairRefused` (the bag untouched, nothing written) when a standard reader
+    reads more of the original than the result keeps.
     """
     path = Path(path)
     if path.is_dir():
-        return _reindex_directory(path, Path(output) if output else None)
+        return _reindex_directory(path, output, in_place)
     if output is not None and Path(output).is_dir():
         raise BagError(f'{output}: is a directory; reindex a .mcap file into a .mcap file')
-    with replaced_when_done(output or path) as temporary:
-        report = _reindex_file(path, temporary)
-        if report.already_whole and output is None:
-            temporary.unlink()          # nothing to change: the original stays untouched
+    report = Reindexed(str(path))
+    bag = Bag(path)
+    if _whole(bag):
+        report.already_whole = True
+        _describe(report, bag)
+        return [report]
+    with ExitStack() as stack:
+        target, place = _target(stack, path, output, in_place)
+        _write_repaired(bag, target, report)
+        _check(path, target, report)
+    report.output = str(place())
     return [report]
 
 
-def _reindex_directory(directory, output):
+def _target(stack, path, output, in_place):
+    """Return (temporary path to write, function giving where it went once done)."""
+    if in_place or output is not None:
+        final = path if in_place else Path(output)
+        return stack.enter_context(replaced_when_done(final)), lambda: final
+    new = stack.enter_context(created_when_done(beside(path)))
+    return new.temporary, lambda: new.path
+
+
+def _whole(bag):
+    """Whether ``bag`` (a Bag) needs no reindexing: no damage, a summary indexing it all."""
+    summary = bag.summary_records
+    return bag.finished and not bag.problems and summary[Opcode.STATISTICS] == 1 and \
+        summary[Opcode.CHUNK_INDEX] == len(bag.chunks) and \
+        summary[Opcode.METADATA_INDEX] == len(bag.metadata) and \
+        summary[Opcode.ATTACHMENT_INDEX] == len(bag.attachments)
+
+
+def _describe(report, bag):
+    """Fill ``report`` with the topics and counts of a whole bag (from its chunks' indexes)."""
+    counts = Counter()
+    for chunk in bag.chunks:
+        for channel, offsets in (chunk.indexes or {}).items():
+            counts[channel] += len(offsets)
+    report.chunks = len(bag.chunks)
+    report.messages = sum(counts.values())
+    report.topics = _topics(bag, counts)
+    report.custom_data = dict(_custom_data(bag))
+
+
+def _reindex_directory(directory, output, in_place):
     files = sorted(directory.glob('*.mcap'))
     if not files:
         raise BagError(f'{directory}: no .mcap files to reindex (sqlite3 bags: use ros2 bag '
                        'reindex)')
-    with replaced_when_done(output or directory) as staging:
+    old_custom = _yaml_custom_data(directory / METADATA)
+    bags = [Bag(f) for f in files]
+    reports = [Reindexed(str(f)) for f in files]
+    if (directory / METADATA).is_file() and all(_whole(b) for b in bags):
+        for report, bag in zip(reports, bags):
+            report.already_whole = True
+            _describe(report, bag)
+        return reports
+    with ExitStack() as stack:
+        if in_place or output is not None:
+            final = directory if in_place else Path(output)
+            staging = stack.enter_context(replaced_when_done(final))
+            place = lambda: final        # noqa: E731
+        else:
+            new = stack.enter_context(created_when_done(beside(directory)))
+            staging, place = new.temporary, lambda: new.path
         staging.mkdir()
-        reports = [_reindex_file(f, staging / f.name) for f in files]
+        for bag, report, source in zip(bags, reports, files):
+            _write_repaired(bag, staging / source.name, report)
+            _check(source, staging / source.name, report)
+        custom = old_custom or next((r.custom_data for r in reports if r.custom_data), {})
         if len(files) == 1:
             report = reports[0]
-            text = metadata_yaml(files[0].name, report.topics, *report.times)
-            (staging / METADATA).write_text(text, encoding='utf-8')
+            text = metadata_yaml(files[0].name, report.topics, *report.times, custom)
         else:           # several files: keep their listing, counts from the files
-            (staging / METADATA).write_text(_merged_metadata(directory, reports),
-                                            encoding='utf-8')
+            text = _merged_metadata(reports, custom)
+        (staging / METADATA).write_text(text, encoding='utf-8')
+    where = str(place())
+    for report in reports:
+        report.output = str(Path(where) / Path(report.path).name)
     return reports
 
 
-def _merged_metadata(directory, reports):
+def _yaml_custom_data(path):
+    """custom_data of a metadata.yaml ({} if none or unreadable)."""
+    try:
+        document = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+        data = document['rosbag2_bagfile_information'].get('custom_data')
+    except Exception:  # absent, unreadable, not rosbag2 metadata: nothing to keep
+        return {}
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+
+def _merged_metadata(reports, custom_data):
     """metadata.yaml for several files: the first file's layout, every file listed."""
     texts = [yaml.safe_load(metadata_yaml(Path(r.path).name, r.topics, *r.times))
              ['rosbag2_bagfile_information'] for r in reports]
@@ -104,6 +205,7 @@ def _merged_metadata(directory, reports):
     info['relative_file_paths'] = [Path(r.path).name for r in reports]
     info['files'] = [f for text in texts for f in text['files']]
     info['message_count'] = sum(counts.values())
+    info['custom_data'] = dict(custom_data) if custom_data else None
     starts = [t['starting_time']['nanoseconds_since_epoch'] for t in texts if t['message_count']]
     ends = [t['starting_time']['nanoseconds_since_epoch'] + t['duration']['nanoseconds']
             for t in texts if t['message_count']]
@@ -113,266 +215,259 @@ def _merged_metadata(directory, reports):
     return yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
 
 
-def _reindex_file(path, target):
-    report = Reindexed(str(path))
+def _custom_data(bag):
+    """The custom data of a bag's ``cvc_balance`` Metadata record ({}: none)."""
+    return next((values for _, name, values, _ in bag.metadata if name == CUSTOM_DATA_RECORD),
+                {})
+
+
+def _topics(bag, counts):
+    """[TopicWritten] of the bag's channels, with ``counts`` {channel id: messages}."""
+    out = []
+    for channel in bag.channels.values():
+        raw = bag.definitions.get((OP_CHANNEL, channel.id), b'')
+        out.append(TopicWritten(channel.topic, channel.msg_type, counts[channel.id],
+                                b'durability: 1' in raw, b'reliability: 2' in raw))
+    return out
+
+
+class _Out:
+    """The repaired file being written: records appended, their offsets known."""
+
+    def __init__(self, stream):
+        self.stream, self.position = stream, 0
+
+    def write(self, *parts):
+        start = self.position
+        for part in parts:
+            self.stream.write(part)
+            self.position += len(part)
+        return start
+
+    def record(self, record):
+        builder = RecordBuilder()
+        record.write(builder)
+        return self.write(builder.end())
+
+
+def _write_repaired(bag, target, report):
+    """Write what ``bag`` reads, whole and indexed, to ``target``; fill ``report``."""
+    data = bag.data
+    counts, times = Counter(), [None, None]
+    chunk_indexes, metadata_indexes, attachment_indexes = [], [], []
+    report.problems = list(bag.problems)
+    with open(target, 'xb') as stream:
+        out = _Out(stream)
+        out.write(MCAP0_MAGIC)
+        if bag.header is not None:
+            out.write(bag.header)
+        else:
+            out.record(Header(profile='ros2', library=_LIBRARY))
+            report.problems.append('header unreadable: a new one written (profile ros2)')
+        for _, name, _, raw in bag.metadata:
+            metadata_indexes.append(MetadataIndex(offset=out.write(raw), length=len(raw),
+                                                  name=name))
+        definitions = [raw for (opcode, _), raw in sorted(bag.definitions.items())]
+        for raw in definitions:
+            out.write(raw)
+        known = set(bag.channels)
+        for chunk in bag.chunks:
+            records, error = decode_chunk(chunk)
+            if error is not None:
+                report.dropped_chunks += 1
+                report.problems.append(f'chunk at byte {chunk.offset} unreadable ({error}): '
+                                       'not copied')
+                continue
+            index = _message_index(records, known)
+            if index is None:
+                report.dropped_chunks += 1
+                report.problems.append(f'chunk at byte {chunk.offset}: its records do not '
+                                       'fill it, or name channels no record defines: not '
+                                       'copied')
+                continue
+            chunk_indexes.append(_write_chunk(out, chunk.compression, chunk.data,
+                                              chunk.uncompressed_size, chunk.crc, index,
+                                              counts, times))
+        for records in _loose_chunks(bag, known):
+            index = _message_index(records, known)
+            chunk_indexes.append(_write_chunk(out, '', records, len(records), 0, index,
+                                              counts, times))
+        for offset, length in bag.attachments:
+            attachment_indexes.append(_attachment_index(out, data[offset:offset + length]))
+        out.record(DataEnd(data_section_crc=0))
+        summary_start = out.position
+        _summary(out, bag, definitions, counts, times, chunk_indexes, metadata_indexes,
+                 attachment_indexes, summary_start)
+    report.chunks = len(chunk_indexes)
+    report.messages = sum(counts.values())
+    report.topics = _topics(bag, counts)
+    report.times = tuple(times)
+    report.custom_data = dict(_custom_data(bag))
+
+
+def _message_index(records, known):
+    """
+    Return {channel: [(log time, offset)]} of a chunk's messages, or None.
+
+    None when the records do not fill the chunk exactly, or a message names a
+    channel no Channel record defines (readers would stop there).
+    """
+    buffer = np.frombuffer(records, np.uint8)
+    offsets, opcodes, lengths, end = record_table(buffer)
+    if end != len(buffer):
+        return None
+    messages = offsets[(opcodes == OP_MESSAGE)]
+    if np.any(lengths[opcodes == OP_MESSAGE] < MESSAGE_HEADER - 9):
+        return None
+    channels = column(buffer, messages + 9, '<u2')
+    log_times = column(buffer, messages + 15, '<u8')
+    index = {}
+    for channel in np.unique(channels).tolist():
+        if channel not in known:
+            return None
+        mine = channels == channel
+        index[channel] = list(zip(log_times[mine].tolist(), messages[mine].tolist()))
+    return index
+
+
+def _write_chunk(out, compression, data, uncompressed_size, crc, index, counts, times):
+    """Write a chunk record and its message indexes; return its ChunkIndex."""
+    stamps = [t for entries in index.values() for t, _ in entries]
+    start, end = (min(stamps), max(stamps)) if stamps else (0, 0)
+    name = compression.encode()
+    header = struct.pack(f'<BQQQQII{len(name)}sQ', Opcode.CHUNK,
+                         8 + 8 + 8 + 4 + 4 + len(name) + 8 + len(data), start, end,
+                         uncompressed_size, crc, len(name), name, len(data))
+    chunk_start = out.write(header, data)
+    chunk_length = len(header) + len(data)
+    offsets = {}
+    for channel, entries in index.items():
+        offsets[channel] = out.record(MessageIndex(channel_id=channel, records=entries))
+        counts[channel] += len(entries)
+    if stamps:
+        times[0] = start if times[0] is None else min(times[0], start)
+        times[1] = end if times[1] is None else max(times[1], end)
+    return ChunkIndex(message_start_time=start, message_end_time=end,
+                      chunk_start_offset=chunk_start, chunk_length=chunk_length,
+                      message_index_offsets=offsets,
+                      message_index_length=out.position - chunk_start - chunk_length,
+                      compression=compression, compressed_size=len(data),
+                      uncompressed_size=uncompressed_size)
+
+
+def _loose_chunks(bag, known):
+    """Yield uncompressed chunk records of the messages found outside chunks (known channels)."""
+    data, records = bag.data, bytearray()
+    for channel, offset in sorted(bag.loose_messages(), key=lambda pair: pair[1]):
+        if channel not in known:
+            continue
+        length, = struct.unpack_from('<Q', data, offset + 1)
+        records += data[offset:offset + 9 + length]
+        if len(records) >= LOOSE_CHUNK:
+            yield bytes(records)
+            records = bytearray()
+    if records:
+        yield bytes(records)
+
+
+def _attachment_index(out, raw):
+    """Copy an Attachment record; return its AttachmentIndex."""
+    log_time, create_time = struct.unpack_from('<QQ', raw, 9)
+    at = 25
+    name_length, = struct.unpack_from('<I', raw, at)
+    name = bytes(raw[at + 4:at + 4 + name_length]).decode('utf-8', 'replace')
+    at += 4 + name_length
+    media_length, = struct.unpack_from('<I', raw, at)
+    media_type = bytes(raw[at + 4:at + 4 + media_length]).decode('utf-8', 'replace')
+    at += 4 + media_length
+    data_size, = struct.unpack_from('<Q', raw, at)
+    return AttachmentIndex(offset=out.write(raw), length=len(raw), log_time=log_time,
+                           create_time=create_time, data_size=data_size, name=name,
+                           media_type=media_type)
+
+
+def _summary(out, bag, definitions, counts, times, chunk_indexes, metadata_indexes,
+             attachment_indexes, summary_start):
+    """The summary section, its offsets, the footer and the closing magic."""
+    groups = []
+
+    def group(opcode, records):
+        start = out.position
+        for record in records:
+            if isinstance(record, bytes):
+                out.write(record)
+            else:
+                out.record(record)
+        if out.position > start:
+            groups.append(SummaryOffset(group_opcode=opcode, group_start=start,
+                                        group_length=out.position - start))
+    schemas = [raw for raw in definitions if raw[0] == OP_SCHEMA]
+    channels = [raw for raw in definitions if raw[0] == OP_CHANNEL]
+    group(Opcode.SCHEMA, schemas)
+    group(Opcode.CHANNEL, channels)
+    group(Opcode.STATISTICS, [Statistics(
+        message_count=sum(counts.values()), schema_count=len(schemas),
+        channel_count=len(channels), attachment_count=len(attachment_indexes),
+        metadata_count=len(metadata_indexes), chunk_count=len(chunk_indexes),
+        message_start_time=times[0] or 0, message_end_time=times[1] or 0,
+        channel_message_counts=dict(counts))])
+    group(Opcode.METADATA_INDEX, metadata_indexes)
+    group(Opcode.ATTACHMENT_INDEX, attachment_indexes)
+    group(Opcode.CHUNK_INDEX, chunk_indexes)
+    offsets_start = out.position
+    for offset in groups:
+        out.record(offset)
+    out.record(Footer(summary_start=summary_start, summary_offset_start=offsets_start,
+                      summary_crc=0))
+    out.write(MCAP0_MAGIC)
+
+
+def standard_counts(path):
+    """
+    Return {reader: Counter(topic: messages)} that standard readers read of an MCAP file.
+
+    The ``mcap`` library's reader (its summary's indexes where there is one, else the
+    file in order) with CRCs checked, and rosbags. What a reader read before it stopped
+    counts (a damaged file stops them part way).
+    """
+    from mcap.reader import make_reader
+    counts = {'the mcap library (CRCs checked)': Counter(), 'rosbags': Counter()}
+    mcap = counts['the mcap library (CRCs checked)']
     try:
         with open(path, 'rb') as stream:
-            size = os.fstat(stream.fileno()).st_size
-            data = mmap.mmap(stream.fileno(), size, access=mmap.ACCESS_READ) if size else b''
-    except OSError as error:
-        raise BagError(f'{path}: cannot read bag: {error.strerror}') from None
-    if data[:8] != MCAP0_MAGIC:
-        raise BagError(f'{path}: not an MCAP file (no MCAP magic at the start)')
-    walk = _Walk(data, report)
-    walk.run()
-    if walk.footer_found:
-        report.already_whole = True
-    with open(target, 'wb') as out:
-        out.write(memoryview(data)[:walk.good_end])
-        out.write(walk.rebuilt_indexes)
-        out.write(_summary(walk, walk.good_end + len(walk.rebuilt_indexes)))
-    report.kept_bytes = walk.good_end
-    report.dropped_bytes = size - walk.good_end
-    report.chunks = len(walk.chunks)
-    report.messages = sum(walk.counts.values())
-    report.topics = walk.topics()
-    first = [c.start_time for c in walk.chunks] + walk.loose_times
-    last = [c.end_time for c in walk.chunks] + walk.loose_times
-    report.times = (min(first), max(last)) if first else (None, None)
-    return report
-
-
-class _Walk:
-    """The top-level records of a (perhaps torn) MCAP file, up to the last whole unit."""
-
-    def __init__(self, data, report):
-        self.data, self.report = data, report
-        self.schemas, self.channels = {}, {}     # id -> raw record bytes (opcode included)
-        self.schema_names, self.channel_info = {}, {}
-        self.chunks, self.counts, self.loose_times = [], Counter(), []
-        self.good_end, self.footer_found = len(MCAP0_MAGIC), False
-        self.torn_indexes = None      # the last chunk, when the file ends in its indexes
-        self.rebuilt_indexes = b''    # its message index records, made from its records
-
-    def run(self):
-        data, position, size = self.data, len(MCAP0_MAGIC), len(self.data)
-        chunk = None
-        while position + 9 <= size:
-            opcode, length = _RECORD.unpack_from(data, position)
-            end = position + 9 + length
-            if end > size:
-                self.report.problems.append(f'record (opcode 0x{opcode:02x}) at byte '
-                                            f'{position} torn by the end of the file: dropped')
-                self.torn_indexes = chunk      # its index group may be partial: rebuilt
-                break
-            if opcode in (Opcode.DATA_END, Opcode.FOOTER):
-                self.footer_found = opcode == Opcode.FOOTER or self._has_footer(end)
-                break
-            if opcode != Opcode.MESSAGE_INDEX and chunk is not None:
-                if not chunk.indexed:
-                    self._count_chunk(chunk)       # no indexes after it: count its records
-                chunk = None                       # later indexes belong to no chunk
-            body = data[position + 9:end]
-            if opcode == Opcode.SCHEMA:
-                schema_id, = struct.unpack_from('<H', body, 0)
-                self.schemas[schema_id] = bytes(data[position:end])
-                self.schema_names[schema_id] = _string(body, 2)
-            elif opcode == Opcode.CHANNEL:
-                channel_id, schema_id = struct.unpack_from('<HH', body, 0)
-                topic = _string(body, 4)
-                self.channels[channel_id] = bytes(data[position:end])
-                self.channel_info[channel_id] = (topic, schema_id, _channel_metadata(body))
-            elif opcode == Opcode.CHUNK:
-                chunk = self._chunk(position, body, end - position)
-                self.chunks.append(chunk)
-            elif opcode == Opcode.MESSAGE_INDEX and chunk is not None:
-                channel_id, entries = struct.unpack_from('<HI', body, 0)
-                chunk.indexes[channel_id] = position - (chunk.offset + chunk.length)
-                chunk.index_length = end - (chunk.offset + chunk.length)
-                self.counts[channel_id] += entries // 16
-                chunk.counted[channel_id] += entries // 16
-                chunk.indexed = True
-            elif opcode == Opcode.MESSAGE:
-                channel_id, _, log_time = struct.unpack_from('<HIQ', body, 0)
-                self.counts[channel_id] += 1
-                self.loose_times.append(log_time)
-            self.good_end = end
-            position = end
-        else:
-            if position < size:
-                self.report.problems.append(f'record header at byte {position} torn by the '
-                                            'end of the file: dropped')
-                self.torn_indexes = chunk
-        if self.torn_indexes is None and chunk is not None and not self.footer_found \
-                and position >= size:
-            self.torn_indexes = chunk      # the file ends in (or right after) its indexes
-        if self.torn_indexes is not None:
-            self._rebuild_indexes(self.torn_indexes)
-        elif chunk is not None and not chunk.indexed:
-            self._count_chunk(chunk)
-
-    def _has_footer(self, end):
-        return len(self.data) >= end + 9 + 20 + len(MCAP0_MAGIC) and \
-            self.data[-len(MCAP0_MAGIC):] == MCAP0_MAGIC
-
-    def _chunk(self, position, body, length):
-        start_time, end_time, size, crc = struct.unpack_from('<QQQI', body, 0)
-        compression = _string(body, 28)
-        at = 32 + len(compression)
-        records_length, = struct.unpack_from('<Q', body, at)
-        records = body[at + 8:at + 8 + records_length]
-        chunk = _Chunk(position, length, start_time, end_time, size, compression,
-                       records_length, records, crc)
-        return chunk
-
-    def _rebuild_indexes(self, chunk):
-        """Replace a chunk's torn index group by message indexes made from its records."""
-        self.counts.subtract(chunk.counted)
-        self.good_end = chunk.offset + chunk.length
-        chunk.indexes, chunk.index_length, chunk.indexed = {}, 0, True
-        records = _decompressed(chunk, self.report)
-        if records is None:
-            return
-        entries, position = {}, 0
-        while position + 9 <= len(records):
-            opcode, length = _RECORD.unpack_from(records, position)
-            if opcode == Opcode.MESSAGE:
-                channel_id, _, log_time = struct.unpack_from('<HIQ', records, position + 9)
-                entries.setdefault(channel_id, []).append((log_time, position))
-            position += 9 + length
-        builder = RecordBuilder()
-        for channel_id, pairs in entries.items():
-            chunk.indexes[channel_id] = builder.count
-            MessageIndex(channel_id=channel_id, records=pairs).write(builder)
-            self.counts[channel_id] += len(pairs)
-        self.rebuilt_indexes = builder.end()
-        chunk.index_length = len(self.rebuilt_indexes)
-        self.report.problems.append(f'message indexes of the last chunk (byte {chunk.offset}) '
-                                    'rebuilt from its records')
-
-    def _count_chunk(self, chunk):
-        records = _decompressed(chunk, self.report)
-        chunk.indexed = True
-        if records is None:
-            return
-        position = 0
-        while position + 9 <= len(records):
-            opcode, length = _RECORD.unpack_from(records, position)
-            if opcode == Opcode.MESSAGE:
-                channel_id, = struct.unpack_from('<H', records, position + 9)
-                self.counts[channel_id] += 1
-            position += 9 + length
-
-    def topics(self):
-        """Return [TopicWritten] of the channels, with the messages counted."""
-        out = []
-        for channel_id, (topic, schema_id, metadata) in self.channel_info.items():
-            qos = metadata.get('offered_qos_profiles', '')
-            out.append(TopicWritten(topic, self.schema_names.get(schema_id, ''),
-                                    self.counts[channel_id], 'durability: 1' in qos,
-                                    'reliability: 2' in qos))
-        return out
-
-
-@dataclass
-class _Chunk:
-    offset: int
-    length: int
-    start_time: int
-    end_time: int
-    uncompressed_size: int
-    compression: str
-    compressed_size: int
-    records: memoryview
-    crc: int
-    indexes: dict = field(default_factory=dict)      # channel -> offset after the chunk
-    index_length: int = 0
-    indexed: bool = False
-    counted: Counter = field(default_factory=Counter)   # messages its indexes list
-
-
-def _decompressed(chunk, report):
+            reader = make_reader(stream, validate_crcs=True)
+            for _, channel, _ in reader.iter_messages(log_time_order=False):
+                mcap[channel.topic] += 1
+    except Exception:  # the library's many errors on damaged files: what it read counts
+        pass
+    mine = counts['rosbags']
     try:
-        if chunk.compression == '':
-            records = bytes(chunk.records)
-        elif chunk.compression == 'zstd':
-            import zstandard
-            records = zstandard.ZstdDecompressor().decompress(
-                chunk.records, max_output_size=chunk.uncompressed_size)
-        elif chunk.compression == 'lz4':
-            import lz4.frame
-            records = lz4.frame.decompress(chunk.records)
-        else:
-            raise ValueError(f'unknown compression {chunk.compression!r}')
-        if chunk.crc and crc32(records) != chunk.crc:
-            raise ValueError('CRC mismatch')
-        return records
-    except Exception as error:       # any codec's error: kept, reported, not counted
-        report.problems.append(f'chunk at byte {chunk.offset} unreadable ({error}): kept '
-                               'as it is, its messages not counted')
-        return None
+        from rosbags.highlevel import AnyReader
+        with AnyReader([Path(path)]) as reader:
+            for connection, _, _ in reader.messages():
+                mine[connection.topic] += 1
+    except Exception:  # as above, rosbags' errors
+        pass
+    return counts
 
 
-def _string(body, at):
-    length, = _STRING.unpack_from(body, at)
-    return bytes(body[at + 4:at + 4 + length]).decode('utf-8')
-
-
-def _channel_metadata(body):
-    at = 4
-    for _ in range(2):                  # topic, message encoding
-        at += 4 + _STRING.unpack_from(body, at)[0]
-    length, = _STRING.unpack_from(body, at)
-    at += 4
-    end, metadata = at + length, {}
-    while at < end:
-        key = _string(body, at)
-        at += 4 + len(key.encode())
-        value = _string(body, at)
-        at += 4 + len(value.encode())
-        metadata[key] = value
-    return metadata
-
-
-def _summary(walk, data_end_at):
-    """DataEnd, the summary section, its offsets, the footer and the closing magic."""
-    builder = RecordBuilder()
-    DataEnd(data_section_crc=0).write(builder)
-    summary_start = data_end_at + builder.count
-    groups = []
-    start = builder.count
-    for raw in walk.schemas.values():
-        builder.write(raw)
-    groups.append((Opcode.SCHEMA, start))
-    start = builder.count
-    for raw in walk.channels.values():
-        builder.write(raw)
-    groups.append((Opcode.CHANNEL, start))
-    start = builder.count
-    times = [c.start_time for c in walk.chunks] + walk.loose_times
-    ends = [c.end_time for c in walk.chunks] + walk.loose_times
-    Statistics(message_count=sum(walk.counts.values()), schema_count=len(walk.schemas),
-               channel_count=len(walk.channels), attachment_count=0, metadata_count=0,
-               chunk_count=len(walk.chunks), message_start_time=min(times, default=0),
-               message_end_time=max(ends, default=0),
-               channel_message_counts=dict(walk.counts)).write(builder)
-    groups.append((Opcode.STATISTICS, start))
-    start = builder.count
-    for chunk in walk.chunks:
-        ChunkIndex(message_start_time=chunk.start_time, message_end_time=chunk.end_time,
-                   chunk_start_offset=chunk.offset, chunk_length=chunk.length,
-                   message_index_offsets={channel: chunk.offset + chunk.length + offset
-                                          for channel, offset in chunk.indexes.items()},
-                   message_index_length=chunk.index_length, compression=chunk.compression,
-                   compressed_size=chunk.compressed_size,
-                   uncompressed_size=chunk.uncompressed_size).write(builder)
-    groups.append((Opcode.CHUNK_INDEX, start))
-    ends = [start for _, start in groups[1:]] + [builder.count]
-    offsets_start = data_end_at + builder.count
-    for (opcode, group_start), group_end in zip(groups, ends):
-        if group_end > group_start:
-            SummaryOffset(group_opcode=opcode, group_start=data_end_at + group_start,
-                          group_length=group_end - group_start).write(builder)
-    Footer(summary_start=summary_start, summary_offset_start=offsets_start,
-           summary_crc=0).write(builder)
-    return builder.end() + MCAP0_MAGIC
+def _check(original, repaired, report):
+    """Refuse a repair that keeps less than a standard reader reads, or reads back wrong."""
+    kept = Counter()
+    for topic in report.topics:
+        kept[topic.topic] += topic.count
+    readers = standard_counts(original)
+    report.readers = {name: sum(c.values()) for name, c in readers.items()}
+    for name, counted in readers.items():
+        short = {topic: (n, kept[topic]) for topic, n in counted.items() if n > kept[topic]}
+        if short:
+            worst = ', '.join(f'{t} {n} against {k}' for t, (n, k) in sorted(short.items())[:3])
+            raise RepairRefused(
+                f'{original}: not reindexed: {name} reads {sum(counted.values())} messages of '
+                f'it, the repair would keep {report.messages} ({worst}); the bag is left as '
+                'it is (read it with that reader, or copy what it reads)')
+    back = standard_counts(repaired)['the mcap library (CRCs checked)']
+    if back != +kept:
+        raise BagError(f'{original}: not reindexed: the repaired file reads back as '
+                       f'{sum(back.values())} messages, {report.messages} written (a bug: '
+                       'please report it); the bag is left as it is')

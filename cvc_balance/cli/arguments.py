@@ -6,7 +6,7 @@ import json
 import math
 import re
 
-from cvc_balance.files import check_output, replaced_when_done
+from cvc_balance.files import check_output, distinct_outputs, replaced_when_done
 from cvc_balance.physics.layout import MAX_MAGNITUDE
 
 EXIT_FAILURE = 1
@@ -124,11 +124,13 @@ def staged_outputs(inputs, bags=(), **outputs):
     Yields {name: temporary path or None}; each is moved onto its path when the block
     ends without error. Raises OutputError (or BagError) first, before any work.
     """
+    distinct_outputs(outputs.values())
     for name, path in outputs.items():
         if path is None:
             continue
-        check_output(path, inputs)
-        if name in bags and not str(path).endswith('.mcap'):
+        directory = name in bags and not str(path).endswith('.mcap')
+        check_output(path, inputs, directory=directory)
+        if directory:
             from cvc_balance.bag.rosbag2 import writable_directory
             writable_directory(path)
     with ExitStack() as stack:
