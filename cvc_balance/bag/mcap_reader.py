@@ -477,6 +477,16 @@ class Bag:
                                      f'({error}); skipped')
             yield number, records
 
+    def check_chunks(self):
+        """Decompress every chunk and check its CRC; those that fail go to ``problems``."""
+        for _ in self.decoded_chunks():
+            pass
+
+    def decoded_chunks(self):
+        """Yield (chunk, its records or None) of every chunk, in order (failures said once)."""
+        for number, records in self._decoded_chunks(range(len(self.chunks))):
+            yield self.chunks[number], records
+
     def message_offsets(self, channel):
         """
         Yield (records as uint8 array, offsets of this channel's message records), in file order.

@@ -30,7 +30,7 @@ from mcap.records import (Channel, ChunkIndex, DataEnd, Footer, Header, Metadata
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
-from cvc_balance.bag.mcap_reader import crc32
+from cvc_balance.bag.mcap_reader import BagError, crc32
 from cvc_balance.messages.msg_schema import schema_text, type_hash
 
 PROFILE = 'ros2'
@@ -221,7 +221,7 @@ class BagWriter:
     """Write a rosbag2-compatible MCAP file (see the module's description)."""
 
     def __init__(self, path, compression='zstd', chunk_bytes=1 << 20, level=None,
-                 metadata=None):
+                 metadata=None, exclusive=False):
         """
         Open ``path`` for writing; ``compression`` 'zstd', 'lz4' or ''.
 
@@ -230,10 +230,20 @@ class BagWriter:
         ({name: {key: value}}, strings) is written as MCAP Metadata records right
         after the header (so a truncated recording keeps them) and indexed in the
         summary, e.g. the machine's identity (:mod:`cvc_balance.bag.machine`).
+        ``exclusive``: the file is created, never an existing one replaced (recordings,
+        written in place): a :class:`~cvc_balance.bag.mcap_reader.BagError` if the
+        name is taken (a file, a link, a directory).
         """
         self.path = str(path)
-        _remove_old(self.path)
-        self._file = open(self.path, 'wb', buffering=0)
+        if exclusive:
+            try:
+                self._file = open(self.path, 'xb', buffering=0)    # O_CREAT | O_EXCL
+            except FileExistsError:
+                raise BagError(f'{self.path}: exists; a recording never replaces a file '
+                               '(give a name not taken)') from None
+        else:
+            _remove_old(self.path)
+            self._file = open(self.path, 'wb', buffering=0)
         self._fd = self._file.fileno()
         self._position = 0
         self._file_lock = threading.Lock()

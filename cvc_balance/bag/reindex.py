@@ -39,9 +39,9 @@ from mcap.writer import MCAP0_MAGIC
 import numpy as np
 import yaml
 
-from cvc_balance.bag.mcap_reader import (Bag, BagError, column, decode_chunk, MESSAGE_HEADER,
+from cvc_balance.bag.mcap_reader import (Bag, BagError, column, crc32, MESSAGE_HEADER,
                                          OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, record_table)
-from cvc_balance.bag.mcap_writer import TopicWritten
+from cvc_balance.bag.mcap_writer import _compressor, TopicWritten
 from cvc_balance.bag.rosbag2 import CUSTOM_DATA_RECORD, METADATA, metadata_yaml
 from cvc_balance.files import created_when_done, replaced_when_done
 
@@ -119,12 +119,19 @@ def _target(stack, path, output, in_place):
 
 
 def _whole(bag):
-    """Whether ``bag`` (a Bag) needs no reindexing: no damage, a summary indexing it all."""
+    """
+    Whether ``bag`` (a Bag) needs no reindexing: no damage, a summary indexing it all.
+
+    Every chunk is decompressed and its CRC checked (problems go to ``bag.problems``).
+    """
     summary = bag.summary_records
-    return bag.finished and not bag.problems and summary[Opcode.STATISTICS] == 1 and \
-        summary[Opcode.CHUNK_INDEX] == len(bag.chunks) and \
-        summary[Opcode.METADATA_INDEX] == len(bag.metadata) and \
-        summary[Opcode.ATTACHMENT_INDEX] == len(bag.attachments)
+    if not (bag.finished and not bag.problems and summary[Opcode.STATISTICS] == 1 and
+            summary[Opcode.CHUNK_INDEX] == len(bag.chunks) and
+            summary[Opcode.METADATA_INDEX] == len(bag.metadata) and
+            summary[Opcode.ATTACHMENT_INDEX] == len(bag.attachments)):
+        return False
+    bag.check_chunks()
+    return not bag.problems
 
 
 def _describe(report, bag):
@@ -255,7 +262,6 @@ def _write_repaired(bag, target, report):
     data = bag.data
     counts, times = Counter(), [None, None]
     chunk_indexes, metadata_indexes, attachment_indexes = [], [], []
-    report.problems = list(bag.problems)
     with open(target, 'xb') as stream:
         out = _Out(stream)
         out.write(MCAP0_MAGIC)
@@ -271,23 +277,28 @@ def _write_repaired(bag, target, report):
         for raw in definitions:
             out.write(raw)
         known = set(bag.channels)
-        for chunk in bag.chunks:
-            records, error = decode_chunk(chunk)
-            if error is not None:
+        for chunk, records in bag.decoded_chunks():
+            if records is None:           # unreadable: said by the reader
                 report.dropped_chunks += 1
-                report.problems.append(f'chunk at byte {chunk.offset} unreadable ({error}): '
-                                       'not copied')
                 continue
             index = _message_index(records, known)
-            if index is None:
-                report.dropped_chunks += 1
-                report.problems.append(f'chunk at byte {chunk.offset}: its records do not '
-                                       'fill it, or name channels no record defines: not '
-                                       'copied')
-                continue
-            chunk_indexes.append(_write_chunk(out, chunk.compression, chunk.data,
-                                              chunk.uncompressed_size, chunk.crc, index,
-                                              counts, times))
+            compressed, crc = chunk.data, chunk.crc
+            if index is None:             # its whole records before the damage, repacked
+                records, kept, dropped = _salvaged(records, known)
+                if not kept:
+                    report.dropped_chunks += 1
+                    report.problems.append(f'chunk at byte {chunk.offset}: no whole message '
+                                           'of a known channel in it: not copied')
+                    continue
+                report.problems.append(f'chunk at byte {chunk.offset}: {kept} of its messages '
+                                       f'copied, {dropped} records damaged or of channels no '
+                                       'record defines left out')
+                compress = _compressor(chunk.compression)
+                compressed = records if compress is None else compress(records)
+                crc = crc32(records)
+                index = _message_index(records, known)
+            chunk_indexes.append(_write_chunk(out, chunk.compression, compressed,
+                                              len(records), crc, index, counts, times))
         for records in _loose_chunks(bag, known):
             index = _message_index(records, known)
             chunk_indexes.append(_write_chunk(out, '', records, len(records), 0, index,
@@ -298,6 +309,7 @@ def _write_repaired(bag, target, report):
         summary_start = out.position
         _summary(out, bag, definitions, counts, times, chunk_indexes, metadata_indexes,
                  attachment_indexes, summary_start)
+    report.problems = bag.problems + report.problems
     report.chunks = len(chunk_indexes)
     report.messages = sum(counts.values())
     report.topics = _topics(bag, counts)
@@ -328,6 +340,27 @@ def _message_index(records, known):
         mine = channels == channel
         index[channel] = list(zip(log_times[mine].tolist(), messages[mine].tolist()))
     return index
+
+
+def _salvaged(records, known):
+    """
+    Return (records, messages kept, records left out) of a damaged chunk's records.
+
+    Its whole records up to where one runs past its end, without the messages of
+    channels no Channel record defines.
+    """
+    buffer = np.frombuffer(records, np.uint8)
+    offsets, opcodes, lengths, _ = record_table(buffer)
+    kept, out = 0, bytearray()
+    for offset, opcode, length in zip(offsets.tolist(), opcodes.tolist(), lengths.tolist()):
+        if opcode == OP_MESSAGE:
+            if length < MESSAGE_HEADER - 9 or \
+                    struct.unpack_from('<H', records, offset + 9)[0] not in known:
+                continue
+            kept += 1
+        out += records[offset:offset + 9 + length]
+    total = int(np.count_nonzero(opcodes == OP_MESSAGE)) + (len(out) < len(records))
+    return bytes(out), kept, total - kept
 
 
 def _write_chunk(out, compression, data, uncompressed_size, crc, index, counts, times):

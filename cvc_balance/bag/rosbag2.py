@@ -284,7 +284,8 @@ def _first_line(error):
     return (str(error).strip().splitlines() or [type(error).__name__])[0]
 
 
-def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None, custom_data=None):
+def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None, custom_data=None,
+                exclusive=False):
     """
     Return a writer for ``path``: a single MCAP file if it ends in .mcap, else a rosbag2 directory.
 
@@ -292,17 +293,18 @@ def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None, custo
     ``custom_data`` ({key: value} strings, e.g. ``{'machine_id': 'gantry-0042'}``) goes
     into the MCAP file as a Metadata record named :data:`CUSTOM_DATA_RECORD` and, for a
     directory, into ``metadata.yaml``'s ``custom_data`` too (as ``ros2 bag record
-    --custom-data`` puts it).
+    --custom-data`` puts it). ``exclusive`` (recordings): the file or directory is
+    created, an existing one refused (BagError), never replaced.
     """
     text = os.fspath(path)
     metadata = {CUSTOM_DATA_RECORD: dict(custom_data)} if custom_data else None
     if text.endswith('.mcap'):
         return BagWriter(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
-                         metadata=metadata)
+                         metadata=metadata, exclusive=exclusive)
     if text.endswith('.db3'):
         raise BagError(f'{text}: cannot write sqlite3 bags; give a .mcap file or a directory')
     return Rosbag2Writer(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
-                         metadata=metadata)
+                         metadata=metadata, exclusive=exclusive)
 
 
 class Rosbag2Writer:
@@ -310,16 +312,28 @@ class Rosbag2Writer:
     A rosbag2 directory: one MCAP file written by :class:`BagWriter`, metadata.yaml on close.
 
     An existing directory is used if it is empty, and replaced if it is a rosbag2
-    directory holding only its listed files; anything else is left alone (error).
+    directory holding only its listed files; anything else is left alone (error). With
+    ``exclusive`` (recordings) the directory is made, an existing one refused.
     """
 
-    def __init__(self, path, **options):
+    def __init__(self, path, exclusive=False, **options):
         """Make (or empty) directory ``path``; ``options`` go to :class:`BagWriter`."""
         self.directory = Path(path.rstrip('/') if isinstance(path, str) else path)
-        _prepare_directory(self.directory)
+        if exclusive:
+            try:
+                self.directory.mkdir()
+            except FileExistsError:
+                raise BagError(f'{self.directory}: exists; a recording never replaces a bag '
+                               'or a directory (give a name not taken)') from None
+            except OSError as error:
+                raise BagError(f'{self.directory}: cannot make the bag directory: '
+                               f'{error.strerror}') from None
+        else:
+            _prepare_directory(self.directory)
         self.file_name = f'{self.directory.name}_0.mcap'
         self.path = str(self.directory)
-        self.writer = BagWriter(self.directory / self.file_name, **options)
+        self.writer = BagWriter(self.directory / self.file_name, exclusive=exclusive,
+                                **options)
         self.custom_data = dict((options.get('metadata') or {}).get(CUSTOM_DATA_RECORD) or {})
         self._closed = False
 

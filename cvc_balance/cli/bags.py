@@ -10,7 +10,7 @@ import sys
 from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, finite, input_topics,
                                        machine_id, OUTPUT_BAG_HELP, positive, print_json,
                                        staged_outputs, tolerance)
-from cvc_balance.files import check_output
+from cvc_balance.files import check_new_output, check_output
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import MAX_STAMP_JUMP
 
@@ -82,7 +82,7 @@ def register(commands):
                       help='playback speed factor (default 1)')
     play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs (and '
                       '/diagnostics) to this bag: a .mcap file, or a rosbag2 directory for '
-                      'any other name')
+                      'any other name; a name not taken (never replaced)')
     add_input_topics(play)
     play.add_argument('--wait', type=positive, default=20.0, metavar='S',
                       help='give up (exit code 1) when no node subscribes to the motion topic, '
@@ -93,7 +93,8 @@ def register(commands):
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
                                  description='Record the run\'s inputs and outputs (raw CDR) '
                                  'to a rosbag2 MCAP file; SIGINT or SIGTERM finalises it.')
-    record.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
+    record.add_argument('-o', '--output', required=True, metavar='BAG',
+                        help=OUTPUT_BAG_HELP + '; a name not taken (never replaced)')
     record.add_argument('topics', nargs='*', metavar='TOPIC',
                         help='topics (patterns with *); default: inputs, outputs, diagnostics')
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
@@ -221,11 +222,12 @@ def _view(args):
 def _play(args):
     from cvc_balance.ros.player import play_main
     if args.output:         # recorded live, in place (a killed run keeps its chunks)
-        check_output(args.output, [args.bag])
+        check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
+        check_new_output(args.output)
     return play_main(args)
 
 
 def _record(args):
     from cvc_balance.ros.recorder import record_main
-    check_output(args.output)    # recorded live, in place (see cvc-balance reindex)
+    check_new_output(args.output)    # recorded live, in place (see cvc-balance reindex)
     return record_main(args)

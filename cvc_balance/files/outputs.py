@@ -74,10 +74,10 @@ def check_new_output(path):
     For recordings, which are written in place: an existing file, directory or link of
     that name (a symlink, even a dangling one) is refused, never replaced.
     """
-    check_output(path, directory=True)
     if os.path.lexists(path):
-        raise OutputError(f'{path}: exists; a recording never replaces a file (give a name '
+        raise OutputError(f'{path}: exists; a recording never replaces it (give a name '
                           'not taken)')
+    check_output(path, directory=True)
 
 
 def distinct_outputs(paths):

@@ -41,12 +41,14 @@ class BagRecorder:
         """
         Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``.
 
-        ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``);
-        ``machine_id``: the machine recorded, written into the bag (``bag.machine``).
+        ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``), created:
+        an existing name (also a link to a file) is refused with a BagError, never
+        replaced; ``machine_id``: the machine recorded, written into the bag
+        (``bag.machine``).
         """
         self.node = node
         self.writer = open_writer(path, compression=compression, chunk_bytes=chunk_bytes,
-                                  custom_data=custom_data(machine_id))
+                                  custom_data=custom_data(machine_id), exclusive=True)
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
