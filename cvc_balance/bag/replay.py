@@ -28,6 +28,8 @@ from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, un
 JOINT_STATE, FLOAT64 = topics.JOINT_STATE_TYPE, topics.FLOAT64_TYPE
 STRING, WRENCH = topics.STRING_TYPE, topics.WRENCH_TYPE
 BLOCK = 1 << 14
+SAID = 5
+"""Rejected layout messages described one by one (the others counted)."""
 """Samples computed at once (the engine's work arrays stay in cache)."""
 LEVELS = {'zstd': -5, 'lz4': -1}
 """
@@ -106,21 +108,31 @@ def layout_events(bag, layout_messages, layout_file=None):
     Return ([(log time ns, Layout)], problems): the layouts in force, from their log times.
 
     ``layout_file`` (what if) replaces the bag's layouts for the whole run. A layout
-    message that does not parse is reported and the previous one stays in force. Raises
-    BagError when no layout is usable.
+    message that does not parse costs only itself: it is reported (the first
+    :data:`SAID` of them one by one, then their count) and the previous one stays in
+    force (before the first good one: none). Raises BagError when no layout is usable.
     """
     problems = []
     if layout_file is not None:
         from cvc_balance.physics.layout_file import load_layout
         events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
     else:
-        events = []
+        events, rejected = [], 0
         for log_time, text in layout_messages:
             try:
                 events.append((log_time, layout_from_text(text, source='layout message')))
+                continue
             except LayoutError as error:
-                problems.append(f'layout at {log_time * 1e-9:.3f} s rejected '
-                                f'(previous stays in force): {error}')
+                why = str(error)
+            except Exception as error:   # a bug on a hostile text: this message's alone
+                why = f'internal error: {type(error).__name__}: {error}'
+            rejected += 1
+            if rejected <= SAID:
+                problems.append(f'layout at {log_time * 1e-9:.3f} s rejected (previous stays '
+                                f'in force): {why}')
+        if rejected > SAID:
+            problems.append(f'{rejected} layout messages rejected in all (the first {SAID} '
+                            'said above)')
     if not events:
         raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
                        'name its topic with --layout or give a layout file with --layout-file')

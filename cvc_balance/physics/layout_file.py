@@ -154,6 +154,8 @@ def _parse(text, source):
         problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
         raise LayoutError(f'{source}:{where}: not valid YAML or JSON: {short(problem, 80)}') \
             from None
+    except LayoutError:
+        raise                   # said already (aliases), not wrapped below as a ValueError
     except (ValueError, TypeError, IndexError, OverflowError) as error:
         # PyYAML's constructors fail like this on e.g. `!!int ` or `!!float heavy`.
         raise LayoutError(f'{source}: not valid YAML: {type(error).__name__}: '
@@ -292,6 +294,10 @@ def _check_aliases(root, source):
         key = id(node)
         if children_done:
             children = _children(node)
+            if any(id(child) not in sizes for child in children):
+                # A child begun but not finished is an ancestor: the node holds itself.
+                raise LayoutError(f'{source}: a YAML alias refers to a node that holds it '
+                                  '(a recursive structure): refused')
             sizes[key] = 1 + sum(sizes[id(child)] for child in children)
             continue
         if key in seen:
