@@ -334,7 +334,8 @@ def run_report(args):
     """Run ``cvc-balance report``."""
     from cvc_balance.report import write_report
 
-    check_output(args.output, [args.bag, args.after, args.coefficients, args.layout])
+    check_output(args.output, [args.bag, args.after, args.coefficients, args.layout],
+                 directory=True)
     summary, result = correction_summary(args)
     if args.after:
         summary['measured_after'] = measured_after(args.after, args, result)

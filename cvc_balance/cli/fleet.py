@@ -95,7 +95,11 @@ def _date(text):
 
 
 def _fleet(args):
+    from cvc_balance.files import check_output
     from cvc_balance.fleet.engine import run_fleet
+    from cvc_balance.fleet.store import failures_path, lock_path
+    for table in (args.out, failures_path(args.out), lock_path(args.out)):
+        check_output(table)          # before any work: the folder exists and can be written
     report = run_fleet(args.paths, args.out, engine=args.engine, scheduler=args.scheduler,
                        workers=args.workers, progress=args.progress,
                        retry_failures=args.retry_failures, batch=args.batch)

@@ -3,7 +3,10 @@ The bags under some paths: ``.mcap`` and ``.db3`` files, and rosbag2 directories
 
 A directory holding ``metadata.yaml`` is one bag (its split files are not bags of their
 own); any other directory is searched, files and folders in name order, hidden ones
-(a leading ``.``) and symbolic links to directories skipped. A path given that is itself a
+(a leading ``.``), staging folders of outputs being written (``*.partial``, see
+:mod:`cvc_balance.files.outputs`) and symbolic links to directories skipped. Files that
+are not regular (a FIFO, a link to a device) are found but never read
+(:func:`cvc_balance.fleet.tasks.not_a_bag_file`). A path given that is itself a
 bag file or a rosbag2 directory is taken as it is, whatever its suffix.
 """
 
@@ -13,6 +16,8 @@ from pathlib import Path
 from cvc_balance.bag.rosbag2 import METADATA
 
 BAG_SUFFIXES = ('.mcap', '.db3')
+STAGING_SUFFIX = '.partial'
+"""Staging folders of commands writing (or killed while writing): not searched."""
 
 
 def is_bag_directory(path):
@@ -45,9 +50,10 @@ def find_bags(paths):
             continue
         for directory, folders, files in os.walk(root):
             here = Path(directory)
-            bags = sorted(f for f in folders if not f.startswith('.')
-                          and is_bag_directory(here / f))
-            folders[:] = sorted(f for f in folders if not f.startswith('.') and f not in bags)
+            folders[:] = [f for f in folders if not f.startswith('.') and
+                          not f.endswith(STAGING_SUFFIX)]
+            bags = sorted(f for f in folders if is_bag_directory(here / f))
+            folders[:] = sorted(f for f in folders if f not in bags)
             entries = sorted([(name, True) for name in bags]
                              + [(name, False) for name in files
                                 if not name.startswith('.') and name.endswith(BAG_SUFFIXES)])

@@ -23,8 +23,6 @@ from pathlib import Path
 import sys
 import time
 
-import pyarrow as pa
-import pyarrow.compute as pc
 
 from cvc_balance.fleet import store
 from cvc_balance.fleet.digest import stat_key
@@ -151,10 +149,10 @@ def run_fleet(paths, results, engine='dask', scheduler=None, workers=None, progr
                 else:
                     new_failures.append(payload)
             if time.monotonic() - last_write > checkpoint:
-                _write(results, failures, old, old_failures, new_rows, new_failures, retried)
+                _write(results, failures, new_rows, new_failures, retried)
                 last_write = time.monotonic()
         report.analysis_seconds = time.perf_counter() - moment
-    _write(results, failures, old, old_failures, new_rows, new_failures, retried)
+    _write(results, failures, new_rows, new_failures, retried)
     report.failed = len(new_failures)
     report.rows = len(new_rows)
     report.new_failures = [(row['bag'], row['reason']) for row in new_failures]
@@ -184,16 +182,21 @@ def _known_digests(*tables):
     return known
 
 
-def _write(results, failures, old, old_failures, new_rows, new_failures, retried):
-    """Write both tables: what they held and what this run added (retried failures replaced)."""
-    if new_rows or not results.exists():
-        store.write(results, pa.concat_tables([old, table(new_rows, RESULT_SCHEMA)]))
-    if new_failures or retried or not failures.exists():
-        kept = old_failures
-        if retried:      # a retried bag's old failure goes: it failed again or it is done
-            kept = old_failures.filter(pc.invert(pc.is_in(old_failures.column('digest'),
-                                                          pa.array(sorted(retried)))))
-        store.write(failures, pa.concat_tables([kept, table(new_failures, FAILURE_SCHEMA)]))
+def _write(results, failures, new_rows, new_failures, retried):
+    """
+    Add this run's rows to both tables as they are now (retried failures replaced).
+
+    Under the tables' lock, read again: another run writing the same tables meanwhile
+    keeps its rows (:func:`cvc_balance.fleet.store.merged`).
+    """
+    with store.locked(results):
+        if new_rows or not results.exists():
+            store.write(results, store.merged(store.read(results, RESULT_SCHEMA),
+                                              table(new_rows, RESULT_SCHEMA)))
+        if new_failures or retried or not failures.exists():
+            # A retried bag's old failure goes: it failed again (added back) or it is done.
+            store.write(failures, store.merged(store.read(failures, FAILURE_SCHEMA),
+                                               table(new_failures, FAILURE_SCHEMA), retried))
 
 
 class _Local:

@@ -7,6 +7,8 @@ channel ids are per file) is kept for the next. A task never raises for a bad ba
 returns the reason, so one damaged bag cannot stop or retry a fleet run.
 """
 
+import os
+import stat
 import time
 
 from cvc_balance.bag.machine import machine_of
@@ -17,11 +19,39 @@ from cvc_balance.physics.layout import one_line
 
 
 def identify_bag_file(path):
-    """Return (path, (bytes, mtime ns), digest) of a bag, or (path, None, reason) if unreadable."""
+    """
+    Return (path, (bytes, mtime ns), digest) of a bag, or (path, None, reason) if unreadable.
+
+    Only regular files and directories are read: a FIFO would block the worker for ever
+    and a device (a link to /dev/zero named ``*.mcap``) never end; a broken symbolic
+    link is said as such.
+    """
+    refused = not_a_bag_file(path)
+    if refused is not None:
+        return str(path), None, refused
     try:
         return str(path), stat_key(path), content_digest(path)
     except OSError as error:
         return str(path), None, f'cannot read: {error.strerror or error}'
+
+
+_KINDS = ((stat.S_ISFIFO, 'a FIFO'), (stat.S_ISCHR, 'a character device'),
+          (stat.S_ISBLK, 'a block device'), (stat.S_ISSOCK, 'a socket'))
+
+
+def not_a_bag_file(path):
+    """Return why ``path`` is not read as a bag (not a regular file or directory), or None."""
+    link = f'a symbolic link to {os.readlink(path)}, ' if os.path.islink(path) else ''
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return f'{link or "gone: "}which does not exist (a broken link): not read'
+    except OSError as error:
+        return f'cannot read: {error.strerror or error}'
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = next((name for test, name in _KINDS if test(mode)), 'a special file')
+    return f'{link}not a regular file ({kind}): not read'
 
 
 def identify_bag_files(paths):
