@@ -9,10 +9,13 @@ project's reader: all see the messages the ``mcap`` library's stream reader find
 cut file before the tear (an independent count), with the same bytes.
 """
 
+import json
 from pathlib import Path
 import shutil
+import signal
 import subprocess
 import sys
+import time
 
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
@@ -20,6 +23,7 @@ from mcap.records import Message
 import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Reader as Rosbag2Reader
+import yaml
 
 from cvc_balance.bag.mcap_reader import Bag
 from cvc_balance.bag.reindex import reindex
@@ -130,3 +134,245 @@ def test_reindex_refuses_what_is_not_a_bag(tmp_path):
                          capture_output=True, text=True)
     assert run.returncode == 2 and 'not an MCAP file' in run.stderr
     assert text.read_text() == 'not a bag'
+
+
+# -- issue 24: a repair never shrinks a bag --------------------------------------------------
+
+BASELINE = ROOT / 'bags' / 'field_baseline.mcap'
+
+
+def mcap_messages(path):
+    """(topic, log time, data) of every message the mcap library's indexed reader gives."""
+    with open(path, 'rb') as stream:
+        return sorted((c.topic, m.log_time, bytes(m.data)) for _, c, m in
+                      make_reader(stream, validate_crcs=True).iter_messages(
+                          log_time_order=False))
+
+
+def rosbags_messages(path):
+    with AnyReader([Path(path)]) as reader:
+        return sorted((c.topic, t, bytes(raw)) for c, t, raw in reader.messages())
+
+
+def records(path):
+    """[(offset, opcode, length)] of the top-level records before DataEnd."""
+    data, position, found = Path(path).read_bytes(), 8, []
+    while True:
+        opcode, length = data[position], int.from_bytes(data[position + 1:position + 9],
+                                                         'little')
+        found.append((position, opcode, length))
+        if opcode == 0x0F:
+            return found
+        position += 9 + length
+
+
+def flipped(tmp_path, where):
+    """A copy of the baseline bag with one byte of a record's length field flipped."""
+    data = bytearray(BASELINE.read_bytes())
+    if where == 'header length':
+        at = 8 + 1 + 2           # the header's length field, third byte
+    else:
+        chunk = [(o, n) for o, op, n in records(BASELINE) if op == 0x06][2]
+        # 'up': the length points past the file's end; 'down': inside, at a wrong place.
+        at = chunk[0] + 1 + (2 if where == 'chunk length up' else 0)
+    data[at] ^= 0xFF
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.fixture(scope='module')
+def whole():
+    """What the mcap library reads of the undamaged bag (the figure of issue 24: 10,113)."""
+    return mcap_messages(BASELINE)
+
+
+@pytest.mark.parametrize('where', ['chunk length up', 'chunk length down', 'header length'])
+def test_a_flipped_length_byte_costs_no_message(where, whole, tmp_path):
+    """
+    Issue 24: one byte of a length field flipped; the mcap library still reads all.
+
+    Reindex took the bag for a truncated recording and rewrote it in place from 553,771
+    to 30,599 bytes (591 of 10,113 messages; 0 for the header's length). Now the bag is
+    left as it is and the result, beside it, holds every message; rosbags, which read
+    the header's flip as a torn file, read the result whole too.
+    """
+    path = flipped(tmp_path, where)
+    damaged = path.read_bytes()
+    assert len(whole) == 10_113
+    assert mcap_messages(path) == whole          # by the summary's indexes
+    if where == 'header length':                # rosbags reads the header first: nothing
+        with pytest.raises(Exception, match='Truncated record at offset 17'):
+            rosbags_messages(path)
+    else:
+        assert rosbags_messages(path) == whole
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'reindex', path],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    result = tmp_path / 'damaged.reindexed.mcap'
+    assert run.stdout.startswith(f'{path}: 19 chunks, 10113 messages; written to {result}\n')
+    assert 'problem: ' in run.stdout and 'damaged' in run.stdout     # said, not hidden
+    assert path.read_bytes() == damaged
+    assert mcap_messages(result) == whole and rosbags_messages(result) == whole
+    ours = Bag(result)
+    assert ours.problems == []
+    assert sum(len(ours.messages(c)) for c in ours.channels.values()) == len(whole)
+
+
+def test_a_repair_keeping_less_than_a_standard_reader_is_refused(whole, tmp_path, monkeypatch):
+    """
+    Were the reader to stop at the damaged chunk again, reindex must refuse, saying why.
+
+    The reader's recovery is switched off here (the issue's reader): it keeps the 591
+    messages before the damaged chunk (mcap's stream reader finds them in the bag cut there).
+    """
+    from cvc_balance.bag import mcap_reader
+    from cvc_balance.bag.reindex import RepairRefused
+    monkeypatch.setattr(mcap_reader, '_derived_length', lambda data, offset: None)
+    monkeypatch.setattr(mcap_reader.Bag, '_next_whole_record', lambda self, start: None)
+    monkeypatch.setattr(mcap_reader.Bag, '_read_indexed', lambda self: None)
+    path = flipped(tmp_path, 'chunk length up')
+    damaged = path.read_bytes()
+    cut = tmp_path / 'before.mcap'
+    cut.write_bytes(damaged[:[o for o, op, _ in records(BASELINE) if op == 0x06][2]])
+    assert len(stream_messages(cut)) == 591
+    cut.unlink()
+    with pytest.raises(RepairRefused) as refused:
+        reindex(path)
+    assert str(refused.value) == (
+        f'{path}: not reindexed: the mcap library (CRCs checked) reads 10113 messages of it, '
+        'the repair would keep 591 (/joint_states 5618 against 590, /supports/front/'
+        'measured_load 2247 against 0, /supports/rear/measured_load 2247 against 0); the bag '
+        'is left as it is (read it with that reader, or copy what it reads)')
+    assert path.read_bytes() == damaged
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['damaged.mcap']
+
+
+def test_reindex_writes_beside_the_bag_under_a_name_not_taken(tmp_path):
+    data = SOURCE.read_bytes()
+    path = tmp_path / 'killed.mcap'
+    path.write_bytes(data[:len(data) // 2])
+    expected = stream_messages(path)
+    first, = reindex(path)
+    second, = reindex(path)
+    assert first.output == str(tmp_path / 'killed.reindexed.mcap')
+    assert second.output == str(tmp_path / 'killed.reindexed-2.mcap')
+    assert Path(first.output).read_bytes() == Path(second.output).read_bytes()
+    assert path.read_bytes() == data[:len(data) // 2]
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'reindex', path,
+                          '--in-place'], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert f'written to {path}' in run.stdout
+    assert path.read_bytes() == Path(first.output).read_bytes()
+    assert len(mcap_messages(path)) == len(expected)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        'killed.mcap', 'killed.reindexed-2.mcap', 'killed.reindexed.mcap']
+
+
+# -- issue 28: the machine id survives reindex -----------------------------------------------
+
+MACHINE = 'site_a/gantry-0042'
+
+
+def machine_ids(bag, directory=None):
+    """The machine id as three readers find it: ours, the mcap library, rosbags (directory)."""
+    from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
+    found = {'ours': bag_custom_data(directory or bag).get(MACHINE_ID)}
+    with open(bag, 'rb') as stream:
+        records = {m.name: m.metadata for m in
+                   make_reader(stream, validate_crcs=True).iter_metadata()}
+    found['mcap'] = records.get('cvc_balance', {}).get(MACHINE_ID)
+    if directory is not None:
+        with Rosbag2Reader(directory) as reader:
+            found['rosbags'] = (reader.storage.metadata.custom or {}).get(MACHINE_ID)
+    return found
+
+
+@pytest.fixture(scope='module')
+def recorded(tmp_path_factory):
+    """A run written with a machine id, as a file and as a rosbag2 directory."""
+    from cvc_balance.bag.scenario import load_scenario, write_bag
+    base = tmp_path_factory.mktemp('recorded')
+    scenario = load_scenario(ROOT / 'bags' / 'spin_up_tube_swap.yaml')
+    write_bag(scenario, base / 'run.mcap', machine_id=MACHINE)
+    write_bag(scenario, base / 'run', machine_id=MACHINE)
+    return base
+
+
+def test_the_machine_id_survives_reindex_of_files_cut_anywhere(recorded, tmp_path):
+    import random
+    data = (recorded / 'run.mcap').read_bytes()
+    metadata_end = next(o + 9 + n for o, op, n in records(recorded / 'run.mcap') if op == 0x0C)
+    cuts = sorted(random.Random(28).sample(range(metadata_end, len(data)), 6))
+    for at in cuts:
+        path = tmp_path / f'cut_{at}.mcap'
+        path.write_bytes(data[:at])
+        report, = reindex(path)
+        assert report.custom_data == {'machine_id': MACHINE}
+        assert machine_ids(report.output) == {'ours': MACHINE, 'mcap': MACHINE}, at
+        with open(report.output, 'rb') as stream:
+            statistics = make_reader(stream).get_summary().statistics
+        assert statistics.metadata_count == 1
+    # replay --json gives the id after reindex, as before
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay',
+                          tmp_path / f'cut_{cuts[-1]}.reindexed.mcap', '--json'],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout)['machine_id'] == MACHINE
+
+
+def test_the_machine_id_survives_reindex_of_a_killed_directory(recorded, tmp_path):
+    directory = tmp_path / 'run'
+    shutil.copytree(recorded / 'run', directory)
+    inner = directory / 'run_0.mcap'
+    data = inner.read_bytes()
+    inner.write_bytes(data[:len(data) * 2 // 3])
+    (directory / 'metadata.yaml').unlink()             # killed before it was written
+    report, = reindex(directory)
+    out = tmp_path / 'run.reindexed'
+    assert report.output == str(out / 'run_0.mcap')
+    assert machine_ids(out / 'run_0.mcap', out) == \
+        {'ours': MACHINE, 'mcap': MACHINE, 'rosbags': MACHINE}
+    info = yaml.safe_load((out / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['custom_data'] == {'machine_id': MACHINE}
+
+
+def test_the_machine_id_survives_reindex_of_recordings_killed_with_sigkill(tmp_path):
+    """Three recorders with a machine id, killed with SIGKILL after 0, 0.3 and 0.8 s of data."""
+    from sensor_msgs.msg import JointState
+    from ros_harness import Probe, ros_environment
+    outputs = [tmp_path / 'early.mcap', tmp_path / 'middle.mcap', tmp_path / 'late']
+    recorders = [subprocess.Popen(
+        [sys.executable, '-m', 'cvc_balance.cli', 'record', '-o', str(path), '--chunk-kib', '4',
+         '--machine-id', MACHINE, 'joint_states'], env=ros_environment(),
+        stdout=subprocess.DEVNULL) for path in outputs]
+    probe = Probe('machine_probe')
+    try:
+        publisher = probe.publisher(JointState, 'joint_states', sensor=True)
+        assert probe.spin_until(lambda: publisher.get_subscription_count() >= 3, timeout=20)
+        probe.spin_for(0.5)
+        start, sent = time.monotonic(), 0
+        for recorder, until in zip(recorders, (0.0, 0.3, 0.8)):
+            while time.monotonic() - start < until:
+                msg = JointState(name=['gantry_joint'], position=[0.1 * sent], velocity=[20.0])
+                msg.header.stamp.sec, msg.header.stamp.nanosec = 1, sent * 1000
+                publisher.publish(msg)
+                sent += 1
+                time.sleep(0.001)
+            recorder.send_signal(signal.SIGKILL)
+            recorder.wait()
+    finally:
+        for recorder in recorders:
+            recorder.kill()
+        probe.close()
+    counts = []
+    for path in outputs:
+        report, = reindex(path)
+        counts.append(report.messages)
+        if path.suffix == '.mcap':
+            assert machine_ids(report.output) == {'ours': MACHINE, 'mcap': MACHINE}
+        else:
+            out = Path(report.output).parent
+            assert machine_ids(report.output, out) == \
+                {'ours': MACHINE, 'mcap': MACHINE, 'rosbags': MACHINE}
+    assert counts[0] < counts[1] < counts[2] <= sent, (counts, sent)   # three kill points

@@ -298,7 +298,7 @@ class Bag:
                 self._loose.append((channel_id, start - 9))
         elif opcode == OP_HEADER:
             _string(data, _string(data, start)[1])         # profile, library: readable
-            self.header = bytes(data[start - 9:start + length])
+            self.header = _record_bytes(data, start, length)
         elif opcode == OP_METADATA:
             self._metadata(start - 9, start + length)
         elif opcode == OP_ATTACHMENT:
@@ -311,7 +311,8 @@ class Bag:
         """Register the Metadata record at ``offset`` (ending at ``end``)."""
         name, position = _string(self._bytes, offset + 9)
         values, _ = _string_map(self._bytes, position, end)
-        self.metadata.append((offset, name, values, bytes(self._bytes[offset:end])))
+        self.metadata.append((offset, name, values,
+                              _record_bytes(self._bytes, offset + 9, end - offset - 9)))
 
     def _summary_record(self, opcode, start, length):
         if opcode in (OP_SCHEMA, OP_CHANNEL):
@@ -366,7 +367,7 @@ class Bag:
             if schema_id:                            # 0: no schema, by the specification
                 self.schemas[schema_id] = name
                 self.definitions.setdefault((opcode, schema_id),
-                                            bytes(data[start - 9:start + length]))
+                                            _record_bytes(data, start, length))
             return
         channel_id, schema_id = struct.unpack_from('<HH', data, start)
         topic, position = _string(data, start + 4)
@@ -374,7 +375,7 @@ class Bag:
         self.channels[channel_id] = ChannelInfo(channel_id, topic,
                                                 self.schemas.get(schema_id, ''), encoding,
                                                 schema_id)
-        self.definitions.setdefault((opcode, channel_id), bytes(data[start - 9:start + length]))
+        self.definitions.setdefault((opcode, channel_id), _record_bytes(data, start, length))
 
     def _find_channels_in_chunks(self):
         """
@@ -573,6 +574,11 @@ def _string(data, position, end=None):
     if position + 4 + length > (len(data) if end is None else end):
         raise ValueError('string beyond the record')
     return bytes(data[position + 4:position + 4 + length]).decode('utf-8'), position + 4 + length
+
+
+def _record_bytes(data, start, length):
+    """Return the record whose body is ``length`` bytes at ``start``, with that length field."""
+    return bytes(data[start - 9:start - 8]) + _U64.pack(length) + bytes(data[start:start + length])
 
 
 def _string_map(data, position, end):
