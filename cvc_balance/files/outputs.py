@@ -18,15 +18,14 @@ reindex``).
 """
 
 from contextlib import contextmanager
-import logging
 import os
 from pathlib import Path
 import re
 import shutil
+import sys
 import tempfile
 
 _STAGING = re.compile(r'^(?P<name>.+)\.(?P<pid>\d+)\.[A-Za-z0-9_]{8}\.partial$')
-_log = logging.getLogger(__name__)
 
 
 class OutputError(ValueError):
@@ -97,8 +96,8 @@ def stale_staging(folder):
     """
     Remove the staging folders (and files) in ``folder`` whose owner process is gone.
 
-    Returns their paths; each is logged (a warning, on stderr) so the user knows what a
-    killed command had left.
+    Returns their paths; each is said on stderr, so the user knows what a killed command
+    had left.
     """
     removed = []
     try:
@@ -117,8 +116,8 @@ def stale_staging(folder):
         except OSError:
             continue
         removed.append(entry)
-        _log.warning('removed %s, left by a command that was stopped (process %s)', entry,
-                     match['pid'])
+        print(f'removed {entry}, left by a command that was stopped (process {match["pid"]})',
+              file=sys.stderr)
     return removed
 
 
