@@ -158,8 +158,8 @@ def records(path):
     """[(offset, opcode, length)] of the top-level records before DataEnd."""
     data, position, found = Path(path).read_bytes(), 8, []
     while True:
-        opcode, length = data[position], int.from_bytes(data[position + 1:position + 9],
-                                                         'little')
+        opcode = data[position]
+        length = int.from_bytes(data[position + 1:position + 9], 'little')
         found.append((position, opcode, length))
         if opcode == 0x0F:
             return found
@@ -167,7 +167,7 @@ def records(path):
 
 
 def flipped(tmp_path, where):
-    """A copy of the baseline bag with one byte of a record's length field flipped."""
+    """Copy the baseline bag with one byte of a record's length field flipped."""
     data = bytearray(BASELINE.read_bytes())
     if where == 'header length':
         at = 8 + 1 + 2           # the header's length field, third byte
@@ -183,7 +183,7 @@ def flipped(tmp_path, where):
 
 @pytest.fixture(scope='module')
 def whole():
-    """What the mcap library reads of the undamaged bag (the figure of issue 24: 10,113)."""
+    """Read the undamaged bag with the mcap library (the figure of issue 24: 10,113)."""
     return mcap_messages(BASELINE)
 
 
@@ -275,7 +275,7 @@ MACHINE = 'site_a/gantry-0042'
 
 
 def machine_ids(bag, directory=None):
-    """The machine id as three readers find it: ours, the mcap library, rosbags (directory)."""
+    """Return the machine id as three readers find it: ours, mcap, rosbags (directory)."""
     from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
     found = {'ours': bag_custom_data(directory or bag).get(MACHINE_ID)}
     with open(bag, 'rb') as stream:
@@ -290,7 +290,7 @@ def machine_ids(bag, directory=None):
 
 @pytest.fixture(scope='module')
 def recorded(tmp_path_factory):
-    """A run written with a machine id, as a file and as a rosbag2 directory."""
+    """Write a run with a machine id, as a file and as a rosbag2 directory."""
     from cvc_balance.bag.scenario import load_scenario, write_bag
     base = tmp_path_factory.mktemp('recorded')
     scenario = load_scenario(ROOT / 'bags' / 'spin_up_tube_swap.yaml')

@@ -223,7 +223,7 @@ def _merged_metadata(reports, custom_data):
 
 
 def _custom_data(bag):
-    """The custom data of a bag's ``cvc_balance`` Metadata record ({}: none)."""
+    """Return the custom data of a bag's ``cvc_balance`` Metadata record ({}: none)."""
     return next((values for _, name, values, _ in bag.metadata if name == CUSTOM_DATA_RECORD),
                 {})
 
@@ -421,7 +421,7 @@ def _attachment_index(out, raw):
 
 def _summary(out, bag, definitions, counts, times, chunk_indexes, metadata_indexes,
              attachment_indexes, summary_start):
-    """The summary section, its offsets, the footer and the closing magic."""
+    """Write the summary section, its offsets, the footer and the closing magic."""
     groups = []
 
     def group(opcode, records):
