@@ -467,7 +467,7 @@ class Bag:
                 number = next(numbers, None)
                 if number is None:
                     break
-                ahead.append((number, pool().submit(decode_chunk, self.chunks[number])))
+                ahead.append((number, pool().submit(_decode, self.chunks[number])))
             if not ahead:
                 return
             number, job = ahead.popleft()
@@ -544,7 +544,7 @@ class Bag:
         return out
 
 
-def decode_chunk(chunk):
+def _decode(chunk):
     """Return (records, None) of a chunk, decompressed and checked, or (None, error)."""
     try:
         if chunk.compression == '':
@@ -619,7 +619,7 @@ def _chunk_at(data, offset, end, check=False):
     if check:
         if compression not in COMPRESSIONS:
             return None
-        records, error = decode_chunk(chunk)
+        records, error = _decode(chunk)
         if error is not None or (not crc and record_table(
                 np.frombuffer(records, np.uint8))[3] != len(records)):
             return None

@@ -41,4 +41,8 @@ def run(args):
         print(f'{report.path}: {report.chunks} chunks, {report.messages} messages; {state}')
         for problem in report.problems:
             print(f'  problem: {problem}')
+        if report.readers:
+            print('  checked: ' + ', '.join(f'{name} reads {count}' for name, count in
+                                            report.readers.items())
+                  + f' messages of the bag; the result keeps {report.messages}')
     return 0
