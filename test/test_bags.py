@@ -277,6 +277,23 @@ def test_block_buffers_reused_while_chunks_are_packed(compression, tmp_path):
                     for t, m in got[topic]] == expected[topic]
 
 
+def publish_joint_states(publisher, start, until, sent=0):
+    """
+    Publish JointStates at ~1 kHz until ``until`` s after ``start``; return how many in all.
+
+    Message k (counted from 0 over calls, ``sent`` so far) has position 0.1 k and stamp
+    1 s + k us.
+    """
+    from sensor_msgs.msg import JointState
+    while time.monotonic() - start < until:
+        msg = JointState(name=['gantry_joint'], position=[0.1 * sent], velocity=[20.0])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1, sent * 1000
+        publisher.publish(msg)
+        sent += 1
+        time.sleep(0.001)
+    return sent
+
+
 def test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk(tmp_path):
     """4 KiB chunks of JointState at ~1 kHz; kill -9 after 2 s; read with two readers."""
     from sensor_msgs.msg import JointState
@@ -290,14 +307,7 @@ def test_recorder_killed_with_sigkill_leaves_all_but_the_last_chunk(tmp_path):
     publisher = probe.publisher(JointState, 'joint_states', sensor=True)
     assert probe.spin_until(lambda: publisher.get_subscription_count() > 0, timeout=20)
     probe.spin_for(1.5)   # the recorder's side of the match may come later
-    sent = 0
-    start = time.monotonic()
-    while time.monotonic() - start < 2.0:
-        msg = JointState(name=['gantry_joint'], position=[0.1 * sent], velocity=[20.0])
-        msg.header.stamp.sec, msg.header.stamp.nanosec = 1, sent * 1000
-        publisher.publish(msg)
-        sent += 1
-        time.sleep(0.001)
+    sent = publish_joint_states(publisher, time.monotonic(), 2.0)
     recorder.send_signal(signal.SIGKILL)
     recorder.wait()
     probe.close()

@@ -341,6 +341,7 @@ def test_the_machine_id_survives_reindex_of_recordings_killed_with_sigkill(tmp_p
     """Three recorders with a machine id, killed with SIGKILL after 0, 0.3 and 0.8 s of data."""
     from sensor_msgs.msg import JointState
     from ros_harness import Probe, ros_environment
+    from test_bags import publish_joint_states
     outputs = [tmp_path / 'early.mcap', tmp_path / 'middle.mcap', tmp_path / 'late']
     recorders = [subprocess.Popen(
         [sys.executable, '-m', 'cvc_balance.cli', 'record', '-o', str(path), '--chunk-kib', '4',
@@ -353,12 +354,7 @@ def test_the_machine_id_survives_reindex_of_recordings_killed_with_sigkill(tmp_p
         probe.spin_for(0.5)
         start, sent = time.monotonic(), 0
         for recorder, until in zip(recorders, (0.0, 0.3, 0.8)):
-            while time.monotonic() - start < until:
-                msg = JointState(name=['gantry_joint'], position=[0.1 * sent], velocity=[20.0])
-                msg.header.stamp.sec, msg.header.stamp.nanosec = 1, sent * 1000
-                publisher.publish(msg)
-                sent += 1
-                time.sleep(0.001)
+            sent = publish_joint_states(publisher, start, until, sent)
             recorder.send_signal(signal.SIGKILL)
             recorder.wait()
     finally:
