@@ -222,8 +222,8 @@ def _view(args):
 def _play(args):
     from cvc_balance.ros.player import play_main
     if args.output:         # recorded live, in place (a killed run keeps its chunks)
-        check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
         check_new_output(args.output)
+        check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
     return play_main(args)
 
 
