@@ -161,6 +161,8 @@ class Bag:
         self._unreadable = set()   # chunks already reported
         self._summary_channels = False
         self._walk()
+        if not self.summary_records:
+            self._summary_by_footer()
         self._read_indexed()
         self._find_channels_in_chunks()
         for channel in self.channels.values():    # a schema may come after its channel
@@ -323,6 +325,35 @@ class Bag:
         elif opcode == OP_METADATA_INDEX:
             self._indexed_metadata.append(struct.unpack_from('<QQ', self._bytes, start))
         self.summary_records[opcode] += 1
+
+    def _summary_by_footer(self):
+        """
+        Read the summary where the footer says it starts, when the walk did not reach it.
+
+        Its channels, chunk and metadata indexes are then used as the walk's would be.
+        A summary that does not read whole is left unused, unsaid (the walk said why it
+        stopped).
+        """
+        data, size = self._bytes, len(self._bytes)
+        footer = size - len(MAGIC) - 29
+        if footer < 8 or data[size - len(MAGIC):] != MAGIC or \
+                _RECORD.unpack_from(data, footer) != (OP_FOOTER, 20):
+            return
+        position, = _U64.unpack_from(data, footer + 9)
+        records = []
+        while 8 <= position < footer:
+            opcode, length = _RECORD.unpack_from(data, position)
+            if position + 9 + length > footer:
+                return
+            records.append((opcode, position + 9, length))
+            position += 9 + length
+        if position != footer:
+            return
+        try:
+            for opcode, start, length in records:
+                self._summary_record(opcode, start, length)
+        except (struct.error, UnicodeDecodeError, ValueError):
+            pass
 
     def _read_indexed(self):
         """
