@@ -97,7 +97,8 @@ def read_run(bag_path, sensors=None, speed=None, tolerance=DEFAULT_TOLERANCE,
     bag = open_bag(bag_path)
     motion, layout_messages = read_inputs(bag, joint_name)
     stamp, log = motion.stamp * 1e-9, motion.log_time * 1e-9
-    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP)
+    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP,
+                                receive=log)
     stamp, log = stamp[accepted], log[accepted]
     angle, omega = np.unwrap(motion.angle[accepted]), motion.omega[accepted]
     if len(stamp) < 2:

@@ -72,7 +72,8 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
     motion, layout_messages = read_inputs(bag, joint_name, names)
     events, problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
-    accepted, alpha = accepted_motion(t, motion.angle, motion.omega, max_speed, time_constant)
+    accepted, alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle, motion.omega,
+                                      max_speed, time_constant)
     t, angle, omega = t[accepted], motion.angle[accepted], motion.omega[accepted]
     log_time = motion.log_time[accepted]
     segments = []

@@ -952,7 +952,9 @@ def _one_layout(buffer, offsets, lengths, joint, columns, tally):
         stamp, log_time, angle, omega = columns.take(len(group))
         np.multiply(gather(buffer, group, fields['sec'], '<i4', copy=False), 1_000_000_000,
                     out=stamp, dtype=np.int64)
-        stamp += gather(buffer, group, fields['nanosec'], '<u4', copy=False)
+        nanosec = gather(buffer, group, fields['nanosec'], '<u4', copy=False)
+        stamp += nanosec
+        stamp[nanosec >= 1_000_000_000] = 0     # no stamp: rejected, as the node does
         log_time[:] = log_times(buffer, group, copy=False)
         angle[:] = gather(buffer, group, fields['position'], '<f8', copy=False)
         omega[:] = gather(buffer, group, fields['velocity'], '<f8', copy=False)

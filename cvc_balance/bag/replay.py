@@ -169,8 +169,9 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
                                   f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
     events, summary.problems = layout_events(bag, layout_messages, layout_file)
     t = motion.stamp * 1e-9
-    accepted, accepted_alpha = accepted_motion(t, motion.angle, motion.omega, max_speed,
-                                               time_constant, max_stamp_jump)
+    accepted, accepted_alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle,
+                                               motion.omega, max_speed, time_constant,
+                                               max_stamp_jump)
     summary.rejected = motion.rejected + int((~accepted).sum())
     if (~accepted).any() and len(summary.reasons) < 5:
         summary.reasons.append('motion samples not finite, beyond max_speed, not after the '

@@ -95,55 +95,118 @@ def sample_problem(time, last_time, angle, omega, max_speed):
 
 
 MAX_STAMP_JUMP = 1.0
-"""s: the largest plausible step between two motion samples' stamps (the node's default)."""
+"""s: how far a motion sample's stamp may run ahead of the receive clock (the node's default)."""
+
+LINE_SLEW = 0.01
+"""
+s per s: how fast a time line's offset from the receive clock may follow its stamps.
+
+Clocks differ in rate by parts per million (10^-4 at worst, an undisciplined crystal), so
+1 % lets a line follow any clock; a run of stamps that creeps ahead of the receive clock
+would gain max_stamp_jump + 0.01 s per s of receive time (11.6 days ahead: 3 years).
+"""
+
+NANOSECONDS = 1_000_000_000
+
+
+def stamp_problem(sec, nanosec):
+    """Say what is wrong with a header stamp (``builtin_interfaces/Time``), or return None."""
+    if not 0 <= nanosec < NANOSECONDS:
+        return f'stamp nanosec {nanosec} not below 10^9 (sec {sec})'
+    if sec < 0 or sec == 0 and nanosec == 0:
+        return f'stamp {sec}.{nanosec:09d} s: unset (0) or before 0'
+    return None
 
 
 class StampGate:
     """
-    Stamps of a motion stream: in order, and no implausible jump lets one sample poison it.
+    Stamps of a motion stream on one time line with the receive clock.
 
-    A stamp is accepted when it is after the last accepted one by at most ``max_jump``
-    seconds. A late one (reordered in transit) is rejected. One more than ``max_jump`` away
-    (a clock glitch, a sample stamped 2147483647 s, a clock stepped back) is rejected and
-    remembered: if the next stamp follows it plausibly, the stream has really moved to a new
-    time line (a restarted driver, a clock step), which is then followed from that next
-    sample on; otherwise the old time line goes on and the glitch is forgotten. So a single
-    bad stamp costs one sample, not every later one. With ``max_jump`` inf the gate only
-    keeps the order.
+    Each sample comes with its stamp t and its receive time r (s: the node's monotonic
+    clock, the bag's log time offline). A sample is on the time line when its stamp is
+    after the last accepted one, has advanced by no more than the receive clock did plus
+    ``max_jump``, and runs no more than ``max_jump`` ahead of the line t = r + offset. The
+    offset is that of the line's first sample, and follows the stamps' offset t - r by at
+    most :data:`LINE_SLEW` per second of receive time: clock drift, not a jump. So no
+    sample, and no run of samples that agree with one another, is ever accepted more than
+    ``max_jump`` ahead of the receive clock's line. Stamps that advance less than the
+    receive clock (a pause, a slower simulation clock) are on the line.
+
+    A sample off the line is rejected. While the line is alive (its last sample received
+    less than ``max_jump`` ago) that is all: far-future stamps sent in pairs cannot take
+    over a stream that goes on. After the line has been silent for ``max_jump``, a sample
+    off it (a restarted driver, a clock stepped either way) is remembered; when the next
+    sample follows it plausibly (as a sample follows on a line), a new time line starts
+    at that next sample (``restarted``). With ``max_jump`` inf the gate only keeps the
+    order of the stamps.
     """
 
+    restarted = False
+
     def __init__(self, max_jump=math.inf):
-        """Start with no stamp; ``max_jump`` s (> 0) is the largest plausible step."""
+        """Start with no stamp; ``max_jump`` s (> 0) is the largest plausible lead."""
         if not max_jump > 0.0:
             raise ValueError(f'max_jump must be > 0 s, got {max_jump}')
         self.max_jump = max_jump
-        self.last = None
-        self._candidate = None
+        self.last = None            # stamp, s, of the last accepted sample
+        self.received = None        # its receive time, s
+        self.offset = None          # the line: stamp - receive time, s
+        self._candidate = None      # (stamp, receive time) of a sample off a silent line
 
-    def check(self, time):
+    def check(self, time, receive):
         """
-        Return None and take ``time`` (s) when it is acceptable, else say why not.
+        Return None and take the sample stamped ``time`` received at ``receive`` (s), or why not.
 
         ``restarted`` is True after a call that moved to a new time line (the caller
         resets what depends on the time line: the alpha estimate).
         """
         self.restarted = False
-        if self.last is None or 0.0 < time - self.last <= self.max_jump:
-            self.last, self._candidate = time, None
+        if not time > 0.0:
+            return f'stamp {time:.9f} s: unset (0) or before 0'
+        if self.last is None:
+            self._start(time, receive)
             return None
-        # Far from the time line (either way): perhaps a new one, if the next sample agrees.
-        # Slightly late samples (reordered in transit) are only rejected.
-        candidate = self._candidate
-        self._candidate = time if abs(time - self.last) > self.max_jump else None
-        if candidate is not None and 0.0 < time - candidate <= self.max_jump:
-            self.last, self._candidate, self.restarted = time, None, True
+        problem = self._off_line(time, receive)
+        if problem is None:
+            elapsed = max(receive - self.received, 0.0)
+            step = LINE_SLEW * elapsed
+            self.offset += min(max(time - receive - self.offset, -step), step)
+            self.last, self.received, self._candidate = time, receive, None
             return None
+        if receive - self.received > self.max_jump:       # the line is silent
+            candidate = self._candidate
+            if candidate is not None and _follows(candidate, time, receive, self.max_jump):
+                self._start(time, receive)
+                self.restarted = True
+                return None
+            self._candidate = (time, receive)
+        return problem
+
+    def _start(self, time, receive):
+        self.last, self.received, self.offset = time, receive, time - receive
+        self._candidate = None
+
+    def _off_line(self, time, receive):
+        """Say why a sample is off the time line, or return None."""
         if time <= self.last:
             return f'stamp {time:.9f} s not after the previous {self.last:.9f} s'
-        return (f'stamp {time:.9f} s jumps {time - self.last:.6g} s past the previous '
-                f'(more than max_stamp_jump {self.max_jump:g} s)')
+        elapsed = receive - self.received
+        if not _follows((self.last, self.received), time, receive, self.max_jump):
+            return (f'stamp {time:.9f} s jumps {time - self.last:.6g} s past the previous, '
+                    f'received {elapsed:.6g} s after it (more than max_stamp_jump '
+                    f'{self.max_jump:g} s ahead of the receive clock)')
+        lead = time - receive - self.offset - LINE_SLEW * max(elapsed, 0.0)
+        if lead > self.max_jump:
+            return (f'stamp {time:.9f} s runs {lead:.6g} s ahead of the receive clock\'s '
+                    f'time line (more than max_stamp_jump {self.max_jump:g} s; stamps '
+                    'faster than real time?)')
+        return None
 
-    restarted = False
+
+def _follows(previous, time, receive, max_jump):
+    """Whether a sample (``time``, ``receive``) follows ``previous`` (stamp, receive) plausibly."""
+    last, received = previous
+    return 0.0 < time - last <= max(receive - received, 0.0) + max_jump
 
 
 def acceleration_series(time, omega, time_constant, block=None):
@@ -192,7 +255,7 @@ def acceleration_series(time, omega, time_constant, block=None):
     return alpha
 
 
-def accepted_samples(time, angle, omega, max_speed, max_jump=math.inf):
+def accepted_samples(time, angle, omega, max_speed, max_jump=math.inf, receive=None):
     """
     Which samples the live node accepts, vectorised (see :func:`sample_problem`).
 
@@ -200,37 +263,51 @@ def accepted_samples(time, angle, omega, max_speed, max_jump=math.inf):
     :class:`StampGate` takes. Returns a boolean array; :func:`gate_samples` also
     says where the time line restarted.
     """
-    return gate_samples(time, angle, omega, max_speed, max_jump)[0]
+    return gate_samples(time, angle, omega, max_speed, max_jump, receive)[0]
 
 
-def gate_samples(time, angle, omega, max_speed, max_jump=math.inf):
+def gate_samples(time, angle, omega, max_speed, max_jump=math.inf, receive=None):
     """
     Return (accepted, restarted): boolean arrays over the samples, as the live node decides.
 
-    Without implausible stamps (every valid one after the previous valid one by at most
-    ``max_jump``) this is a few numpy calls; otherwise the valid samples go through a
-    :class:`StampGate` one by one (a damaged stream only).
+    ``time``: the stamps, s; ``receive``: their receive times, s (a bag's log times play
+    the node's receive clock), needed with a finite ``max_jump``. When every valid
+    sample is on one time line (each after the previous, advanced by no more than the
+    receive clock plus ``max_jump``, and the stamps' offsets from the receive times
+    within ``max_jump`` of one another: then no offset runs further ahead of the
+    :class:`StampGate`'s line) this is a few numpy calls; otherwise the valid samples go
+    through a :class:`StampGate` one by one.
     """
     import numpy as np
 
     time = np.asarray(time, float)
+    if receive is None:
+        if math.isfinite(max_jump):
+            raise ValueError('a finite max_jump needs the receive times')
+        receive = np.zeros(len(time))
+    receive = np.asarray(receive, float)
     valid = np.isfinite(angle) & np.isfinite(omega) & (np.abs(omega) <= max_speed)
     restarted = np.zeros(len(time), bool)
-    stamps = time[valid]
-    steps = np.diff(stamps)
-    if np.all((steps > 0.0) & (steps <= max_jump)):
+    stamps, received = time[valid], receive[valid]
+    steps, elapsed = np.diff(stamps), np.maximum(np.diff(received), 0.0)
+    offsets = stamps - received
+    if np.all(stamps > 0.0) and np.all((steps > 0.0) & (steps <= elapsed + max_jump)) and (
+            not len(offsets) or offsets.max() - offsets.min() <= max_jump):
         return valid, restarted
     accepted = np.zeros(len(time), bool)
     gate = StampGate(max_jump)
     for index in np.flatnonzero(valid).tolist():
-        accepted[index] = gate.check(float(time[index])) is None
+        accepted[index] = gate.check(float(time[index]), float(receive[index])) is None
         restarted[index] = gate.restarted
     return accepted, restarted
 
 
-def accepted_motion(time, angle, omega, max_speed, time_constant, max_jump=MAX_STAMP_JUMP):
+def accepted_motion(time, receive, angle, omega, max_speed, time_constant,
+                    max_jump=MAX_STAMP_JUMP):
     """
     Return (accepted, alpha): the samples the live node takes, and its alpha for each of them.
+
+    ``time``: the stamps, s; ``receive``: the receive times, s (a bag's log times).
 
     ``accepted`` is a boolean array over the samples (:func:`gate_samples`); ``alpha``
     (rad/s^2) the :class:`AccelerationEstimator` of the accepted ones, started afresh
@@ -238,7 +315,7 @@ def accepted_motion(time, angle, omega, max_speed, time_constant, max_jump=MAX_S
     """
     import numpy as np
 
-    accepted, restarted = gate_samples(time, angle, omega, max_speed, max_jump)
+    accepted, restarted = gate_samples(time, angle, omega, max_speed, max_jump, receive)
     t, w = np.asarray(time, float)[accepted], np.asarray(omega, float)[accepted]
     bounds = [0, *np.flatnonzero(restarted[accepted]).tolist(), len(t)]
     alpha = np.zeros(len(t))

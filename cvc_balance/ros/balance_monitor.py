@@ -49,7 +49,8 @@ from cvc_balance.physics.layout import LayoutError, one_line
 from cvc_balance.physics.layout_file import (collector_paused, layout_from_text,
                                              MAX_TEXT_BYTES)
 from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
-                                        MAX_STAMP_JUMP, sample_problem, StampGate)
+                                        MAX_STAMP_JUMP, sample_problem, stamp_problem,
+                                        StampGate)
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
@@ -82,10 +83,10 @@ PARAMETERS = (
      'fraction of the grade (ERROR beyond the grade)', (0.01, 1.0)),
     ('max_speed', 1000.0, 'absolute speeds above this (rad/s) are rejected as absurd',
      (1e-3, 1e5)),
-    ('max_stamp_jump', MAX_STAMP_JUMP, 'a motion sample stamped more than this (s) from '
-     'the previous one is rejected, and a new time line followed only when the next sample '
-     'agrees',
-     (1e-3, 1e6)),
+    ('max_stamp_jump', MAX_STAMP_JUMP, 'a motion sample whose stamp runs more than this (s) '
+     'ahead of the receive clock (since the previous sample, or against the time line) is '
+     'rejected; after this long without an accepted sample, a new time line is followed '
+     'when two samples agree', (1e-3, 1e6)),
     ('identify_window_revs', 10, 'revolutions over which the load cells fit the measured '
      'unbalance (supports/<name>/measured_load)', (1, 100000)),
     ('residual_warn', RESIDUAL_WARN, 'WARN when a plane\'s residual (measured - layout) '
@@ -308,9 +309,10 @@ class BalanceMonitor(Node):
             self._counts['dropped'] += 1
             self._log_throttled('dropped', 'warning', 'no layout yet: motion samples dropped')
             return
-        time = sec + nanosec * 1e-9
-        problem = sample_problem(time, None, angle, omega, self.params['max_speed']) or \
-            self._gate.check(time)
+        time, received = sec + nanosec * 1e-9, monotonic()
+        problem = stamp_problem(sec, nanosec) or \
+            sample_problem(time, None, angle, omega, self.params['max_speed']) or \
+            self._gate.check(time, received)
         if problem:
             self._reject(f'motion sample: {problem}')
             return
@@ -349,7 +351,7 @@ class BalanceMonitor(Node):
         speed = omega if omega >= 0.0 else -omega
         if speed > self._top_speed:
             self._top_speed = speed
-        self._last_input = monotonic()
+        self._last_input = received
         self._counts['accepted'] += 1
         self._period_accepted += 1
 
