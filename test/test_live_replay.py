@@ -8,6 +8,7 @@ joint states with their timing and records the node's outputs. Both bags are com
 through two implementations of the estimator).
 """
 
+import math
 from pathlib import Path
 import signal
 import subprocess
@@ -85,3 +86,88 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
             assert topic in topics
         stamps, _ = outputs(tmp_path / 'node.mcap')['/bearing_load']
         assert len(stamps) == summary.accepted
+
+
+DRUM = {'name': 'drum', 'gravity': [0.0, -9.80665, 0.0],
+        'components': [{'name': 'drum', 'mass': 300.0, 'radius': 0.0, 'angle': 0.0},
+                       {'name': 'lump', 'mass': 2.0, 'radius': 0.6, 'angle_deg': 200.0,
+                        'z': 0.1}],
+        'supports': [{'name': 'front', 'z': -0.3}, {'name': 'rear', 'z': 0.3, 'axial': True}]}
+
+
+def hostile_time_line_bag(path):
+    """
+    Write a bag of 400 good samples at 500 Hz and 4 bad stamps; return the good stamps (ns).
+
+    Stamps 1.7e9 s on, log times 3 s before them. First a sample stamped 0; after the
+    100th good one a stamp of nanosec 4294967295 (sec 4 s early: as one number 0.095 s
+    after the good one); after the 200th two samples stamped 11.6 days ahead, 1 ms
+    apart (they agree); after the 300th a pause of 1.5 s (more than max_stamp_jump), the
+    stamps advancing as the log times do.
+    """
+    import yaml
+    from independent import TYPESTORE
+    from cvc_balance.bag.mcap_writer import BagWriter
+    joint_type, string_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
+    state, header = TYPESTORE.types[joint_type], TYPESTORE.types['std_msgs/msg/Header']
+    stamp_type = TYPESTORE.types['builtin_interfaces/msg/Time']
+    start, lead = 1_700_000_000 * 10**9, 3 * 10**9
+    events, good = [], []         # (log ns, sec, nanosec, angle, omega)
+    for k in range(400):
+        ns = start + k * 2_000_000 + (1_500_000_000 if k >= 300 else 0)
+        good.append(ns)
+        omega = 20.0 + 0.5 * k * 0.002
+        events.append((ns - lead, ns // 10**9, ns % 10**9, math.remainder(0.02 * k, 2 * math.pi),
+                       omega))
+        if k == 100:
+            events.append((ns - lead + 500_000, ns // 10**9 - 4, 4294967295, 0.0, omega))
+        if k == 200:
+            far = ns + int(11.6 * 86400e9)
+            events += [(ns - lead + 300_000, far // 10**9, far % 10**9, 0.0, omega),
+                       (ns - lead + 600_000, far // 10**9, far % 10**9 + 1_000_000, 0.0, omega)]
+    events.insert(0, (start - lead - 1_000_000, 0, 0, 0.0, 20.0))
+    with BagWriter(path, chunk_bytes=8192) as writer:
+        layout = writer.add_channel('/layout', string_type, latched=True)
+        writer.write(layout, start - lead - 50_000_000, TYPESTORE.serialize_cdr(
+            TYPESTORE.types[string_type](data=yaml.safe_dump(DRUM)), string_type).tobytes())
+        joints = writer.add_channel('/joint_states', joint_type, best_effort=True)
+        for log, sec, nanosec, q, w in events:
+            msg = state(header=header(stamp=stamp_type(sec=sec, nanosec=nanosec), frame_id=''),
+                        name=['gantry_joint'], position=np.array([q]), velocity=np.array([w]),
+                        effort=np.array([], dtype=float))
+            writer.write(joints, log, TYPESTORE.serialize_cdr(msg, joint_type).tobytes())
+    return good
+
+
+def test_bad_stamps_and_a_pause_are_judged_alike_live_and_offline(tmp_path):
+    """
+    Stamp 0, nanosec 4294967295, a far-future pair and a pause of 1.5 s, played live.
+
+    The node answers exactly the 400 good samples, each once and stamped as sent (none
+    stamped 0, 11.6 days ahead or with nanosec beyond 10^9; the sample after the pause
+    kept), and refuses the 4 others; the offline replay of the bag (log times as the
+    receive clock) decides the same, sample for sample, with the same outputs.
+    """
+    bag = tmp_path / 'hostile.mcap'
+    good = hostile_time_line_bag(bag)
+    node = NodeProcess('cvc_balance.ros.balance_monitor', [], tmp_path / 'node.log')
+    live = tmp_path / 'live.mcap'
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
+                          str(live), '--wait', '60'], env=ros_environment(),
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr
+    assert node.stop(signal.SIGINT) == 0
+    log = node.log()
+    assert 'motion samples: 400 accepted, 4 rejected, 0 dropped' in log, log
+    summary = replay(bag, tmp_path / 'offline.mcap')
+    assert (summary.accepted, summary.rejected) == (400, 4)
+    got, expected = outputs(live), outputs(tmp_path / 'offline.mcap')
+    assert got.keys() == expected.keys() == {'/bearing_load', '/unbalance', '/drive_torque',
+                                             '/supports/front/load', '/supports/rear/load'}
+    for topic, (stamps, values) in expected.items():
+        assert stamps.tolist() == good, topic
+        order = np.argsort(got[topic][0])
+        assert got[topic][0][order].tolist() == good, topic
+        scale = np.abs(values).max()
+        bound = 2e-12 if topic == '/drive_torque' else 4e-15
+        assert np.abs(got[topic][1][order] - values).max() <= bound * scale, topic

@@ -118,6 +118,17 @@ def stamp_problem(sec, nanosec):
     return None
 
 
+def stamp_seconds(sec, nanosec):
+    """
+    Return a header stamp in s, rounded as a bag's nanoseconds are (``ns * 1e-9``).
+
+    Not ``sec + nanosec * 1e-9``: at 1.7e9 s a float resolves 0.24 us, and two roundings
+    that differ move the alpha estimate (the live node and the replay would disagree by
+    1e-8 of the bearing load).
+    """
+    return (sec * NANOSECONDS + nanosec) * 1e-9
+
+
 class StampGate:
     """
     Stamps of a motion stream on one time line with the receive clock.

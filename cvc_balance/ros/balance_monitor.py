@@ -50,7 +50,7 @@ from cvc_balance.physics.layout_file import (collector_paused, layout_from_text,
                                              MAX_TEXT_BYTES)
 from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
                                         MAX_STAMP_JUMP, sample_problem, stamp_problem,
-                                        StampGate)
+                                        stamp_seconds, StampGate)
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
@@ -293,7 +293,7 @@ class BalanceMonitor(Node):
     def _on_speed(self, msg):
         omega = msg.data
         sec, nanosec = divmod(self.get_clock().now().nanoseconds, 1_000_000_000)
-        time = sec + nanosec * 1e-9
+        time = stamp_seconds(sec, nanosec)
         problem = sample_problem(time, None, 0.0, omega, self.params['max_speed'])
         if problem:
             self._reject(f'speed: {problem}')
@@ -309,7 +309,7 @@ class BalanceMonitor(Node):
             self._counts['dropped'] += 1
             self._log_throttled('dropped', 'warning', 'no layout yet: motion samples dropped')
             return
-        time, received = sec + nanosec * 1e-9, monotonic()
+        time, received = stamp_seconds(sec, nanosec), monotonic()
         problem = stamp_problem(sec, nanosec) or \
             sample_problem(time, None, angle, omega, self.params['max_speed']) or \
             self._gate.check(time, received)

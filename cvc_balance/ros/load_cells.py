@@ -21,6 +21,7 @@ from cvc_balance.identify.live import SlidingFit
 from cvc_balance.messages import topics
 from cvc_balance.physics import assessment
 from cvc_balance.physics.frames import degrees_360, g_mm
+from cvc_balance.physics.motion import stamp_seconds
 from cvc_balance.physics.unbalance import unbalance_wrench
 
 
@@ -54,13 +55,13 @@ class LoadCells:
     def _on_reading(self, support, msg):
         stamp, wrench = msg.header.stamp, msg.wrench
         moment = (wrench.torque.x, wrench.torque.y) if len(self.model.supports) == 1 else None
-        if self.fit.reading(support, stamp.sec + stamp.nanosec * 1e-9,
+        if self.fit.reading(support, stamp_seconds(stamp.sec, stamp.nanosec),
                             (wrench.force.x, wrench.force.y), moment):
             self.readings[support] += 1
 
     def motion(self, sec, nanosec, angle, omega, alpha):
         """Take a motion sample; at each completed revolution solve and publish."""
-        self.fit.motion(sec + nanosec * 1e-9, angle, omega, alpha)
+        self.fit.motion(stamp_seconds(sec, nanosec), angle, omega, alpha)
         if self.fit.revolutions == self._solved_at or not any(self.readings.values()):
             return
         self._solved_at = self.fit.revolutions
