@@ -189,3 +189,44 @@ def test_rejected_samples_neither_flood_the_log_nor_grow_the_node(tmp_path):
     import re
     counts = re.search(r'motion samples: (\d+) accepted, (\d+) rejected', node.log())
     assert counts and int(counts[1]) == 0 and 49_000 <= int(counts[2]) <= 50_000, counts
+
+
+def test_layouts_that_come_during_a_long_parse_wait_and_only_the_newest_is_parsed(tmp_path):
+    """
+    One layout parsed at a time; of those that come meanwhile, the newest wins.
+
+    A 30,000-component YAML layout (2.4 MB, about 2 s to parse here), then, once the node
+    has it, four small ones 20 ms apart while it is parsed: the big one is put in force,
+    the first three small ones are dropped unparsed (one log line each, naming their
+    size), the fourth follows. Before, every layout queued behind a slow one was parsed
+    and put in force in turn (a 36 MB YAML layout took 65 s, and the good layouts behind
+    it waited for it all).
+    """
+    import re
+    node = start_node(tmp_path, LAYOUT_A)
+    probe = Probe('queue_probe')
+    probe.record(DiagnosticArray, '/diagnostics')
+    try:
+        layout_pub = probe.publisher(String, 'layout', latched=True)
+        wait_until_connected(probe, node, 'layout')
+        smalls = [yaml.safe_dump(dict(LAYOUT_A, name=f'small_{k}')) for k in range(1, 5)]
+        big = yaml.safe_dump(json.loads(big_layout(30_000)))
+        layout_pub.publish(String(data=big))
+        # Not before the node has it: a latched writer keeps only its last message.
+        assert probe.spin_until(lambda: f'layout received on the layout topic ({len(big)} '
+                                'characters): parsing' in node.log(), 20.0), node.log()
+        for text in smalls:
+            probe.spin_for(0.02)
+            layout_pub.publish(String(data=text))
+        assert wait_for_diagnostics(probe, lambda s, v: v.get('layout') == 'small_4', 30.0), \
+            node.log()[-3000:]
+    finally:
+        probe.close()
+    assert node.stop(signal.SIGINT) == 0
+    log = node.log()
+    assert re.findall(r"layout '(\w+)' \(", log) == ['layout_a', 'big_30000', 'small_4'], log
+    assert log.count('(544 characters): waits for the one being parsed') == 4
+    dropped = re.findall(r'layout dropped unparsed \((\d+) characters from the layout topic\): '
+                         r'a newer one came while another was being parsed; the newest wins',
+                         log)
+    assert dropped == [str(len(text)) for text in smalls[:3]] == ['544'] * 3

@@ -23,7 +23,6 @@ layout's plausibility warnings, the node's counts; STALE when no motion sample c
 warnings, ERROR as an error, back to OK as info).
 """
 
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 import math
 import sys
@@ -177,6 +176,7 @@ class BalanceMonitor(Node):
         self._last_time = None
         self._omega = 0.0
         self._counts = {'accepted': 0, 'rejected': 0, 'dropped': 0}
+        self._layouts_dropped = 0       # layouts not parsed: a newer one came meanwhile
         self._period_accepted = 0
         self._period_start = monotonic()
         self._started = self._period_start
@@ -191,9 +191,11 @@ class BalanceMonitor(Node):
         self._reported_measured = None
         self._layout_error = ''
         self._gate = StampGate(self.params['max_stamp_jump'])
-        # Layouts are parsed and aggregated on their own thread, put in force here, in order.
+        # Layouts are parsed and aggregated on their own thread, one at a time, and put in
+        # force here; of those that come meanwhile only the newest waits (it wins).
         self._layout_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='layout')
-        self._preparing = deque()
+        self._preparing = None          # the future of the layout being prepared
+        self._waiting = None            # the newest layout text come meanwhile
         self._layout_poll = None
         self._rerun = None
         if self.params['rerun']:
@@ -302,7 +304,7 @@ class BalanceMonitor(Node):
 
     def _process(self, sec, nanosec, angle, omega):
         """Compute and publish the outputs of one motion sample (plain floats)."""
-        if self._preparing:
+        if self._preparing is not None:
             self._take_prepared()       # a new layout takes effect between two samples
         active = self._active
         if active is None:
@@ -389,21 +391,40 @@ class BalanceMonitor(Node):
     # -- layout ----------------------------------------------------------------------
 
     def _on_layout(self, msg):
-        """Hand the layout text to the worker thread; it is put in force when ready."""
-        self._preparing.append(self._layout_worker.submit(prepare_layout, msg.data,
-                                                          'layout topic'))
+        """Hand the layout text to the worker thread, or let it wait there (newest only)."""
+        self.get_logger().info(f'layout received on the layout topic ({len(msg.data)} '
+                               'characters): ' + ('parsing' if self._preparing is None else
+                                                  'waits for the one being parsed'))
+        if self._preparing is None:
+            self._preparing = self._layout_worker.submit(prepare_layout, msg.data,
+                                                         'layout topic')
+        else:
+            if self._waiting is not None:
+                self._drop_waiting()
+            self._waiting = msg.data
         if self._layout_poll is None:    # without samples flowing, a timer takes it
             self._layout_poll = self.create_timer(0.01, self._guarded(self._take_prepared))
 
+    def _drop_waiting(self):
+        self._layouts_dropped += 1
+        self.get_logger().warning(
+            f'layout dropped unparsed ({len(self._waiting)} characters from the layout '
+            'topic): a newer one came while another was being parsed; the newest wins')
+
     def _take_prepared(self):
-        """Put in force (or refuse) the layouts whose preparation is done, in arrival order."""
-        while self._preparing and self._preparing[0].done():
-            prepared = self._preparing.popleft().result()
+        """Put in force (or refuse) the layout prepared; start on the one waiting, if any."""
+        if self._preparing is not None and self._preparing.done():
+            prepared = self._preparing.result()
+            self._preparing = None
             if isinstance(prepared, str):
                 self._refuse_layout(prepared)
             else:
                 self._apply(prepared)
-        if not self._preparing and self._layout_poll is not None:
+            if self._waiting is not None:
+                self._preparing = self._layout_worker.submit(prepare_layout, self._waiting,
+                                                             'layout topic')
+                self._waiting = None
+        if self._preparing is None and self._layout_poll is not None:
             self.destroy_timer(self._layout_poll)
             self._layout_poll = None
 
