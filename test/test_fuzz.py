@@ -30,7 +30,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 import yaml
@@ -126,7 +126,7 @@ def joint_state_fields(draw):
 
 
 def joint_state(node, fields):
-    """Return the JointState of ``fields``, on the node's time line unless stamped."""
+    """Return the JointState of ``fields`` (CDR bytes), on the node's time line unless stamped."""
     node.clock_s = min(max(node.clock_s + fields['dt'], 0.0), 2.0e9)
     whole = math.floor(node.clock_s)
     msg = JointState(name=fields['name'], position=fields['position'],
@@ -134,7 +134,7 @@ def joint_state(node, fields):
     msg.header.stamp.sec = int(whole) if fields['sec'] is None else fields['sec']
     msg.header.stamp.nanosec = (int((node.clock_s - whole) * 1e9) if fields['nanosec'] is None
                                 else fields['nanosec'])
-    return msg
+    return serialize_message(msg)
 
 
 @FUZZ
@@ -146,7 +146,7 @@ def test_any_joint_state_or_speed_is_taken_or_refused(node, data):
         if data.draw(st.booleans()):
             node._on_joint_states(joint_state(node, data.draw(joint_state_fields())))
         else:
-            node._on_speed(Float64(data=data.draw(FLOATS)))
+            node._on_speed(serialize_message(Float64(data=data.draw(FLOATS))))
     assert check_after(node) == digest
     for name in ('accepted', 'rejected'):
         OUTCOMES['samples', name] += node._counts[name] - counts[name]
@@ -171,7 +171,7 @@ def test_any_layout_text_is_put_in_force_or_refused(node, data):
         expected = None
     node._layout_error = ''
     node._on_layout(String(data=text))
-    node._preparing[-1].result(timeout=30)
+    node._preparing.result(timeout=30)
     node._take_prepared()
     after = check_after(node)
     OUTCOMES['layout', 'refused' if expected is None else 'in force'] += 1
@@ -187,7 +187,7 @@ def test_any_layout_text_is_put_in_force_or_refused(node, data):
     msg = JointState(name=['spin'], position=[0.5], velocity=[3.0])
     msg.header.stamp.sec, msg.header.stamp.nanosec = whole, int((node.clock_s - whole) * 1e9)
     accepted = node._counts['accepted']
-    node._on_joint_states(msg)
+    node._on_joint_states(serialize_message(msg))
     wrenches = [m for _, m in node.captured.messages if isinstance(m, bytes)]
     if node._counts['accepted'] == accepted + 1:
         assert len(wrenches) >= 3 + len(node._active.supports)
@@ -213,7 +213,8 @@ def test_any_load_cell_reading_is_taken_or_dropped(node, data):
                                              | st.integers(0, 10**9 - 1))
         for part in (msg.wrench.force, msg.wrench.torque):
             part.x, part.y, part.z = (data.draw(FLOATS) for _ in range(3))
-        cells._on_reading(data.draw(st.sampled_from(list(cells.readings))), msg)
+        cells._on_reading(data.draw(st.sampled_from(list(cells.readings))),
+                          serialize_message(msg))
         if data.draw(st.booleans()):
             node._on_joint_states(joint_state(node, data.draw(joint_state_fields())))
     check_after(node)

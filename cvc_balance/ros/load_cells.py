@@ -12,6 +12,7 @@ diagnostic status gets what the cells measured, the residual per plane and the f
 """
 
 from functools import partial
+import struct
 
 from geometry_msgs.msg import WrenchStamped
 
@@ -19,6 +20,7 @@ from cvc_balance.identify.estimate import identified_unbalance, layout_unbalance
 from cvc_balance.identify.fit import Estimate
 from cvc_balance.identify.live import SlidingFit
 from cvc_balance.messages import topics
+from cvc_balance.messages.cdr import read_wrench_stamped
 from cvc_balance.physics import assessment
 from cvc_balance.physics.frames import degrees_360, g_mm
 from cvc_balance.physics.motion import stamp_seconds
@@ -43,7 +45,7 @@ class LoadCells:
         self._solved_at = 0
         self._subscriptions = [
             node.create_subscription(WrenchStamped, topics.measured_load(s.name),
-                                     partial(self._on_reading, s.name), qos)
+                                     partial(self._on_reading, s.name), qos, raw=True)
             for s in model.supports]
 
     def close(self):
@@ -52,11 +54,15 @@ class LoadCells:
             self.node.destroy_subscription(subscription)
         self._subscriptions = []
 
-    def _on_reading(self, support, msg):
-        stamp, wrench = msg.header.stamp, msg.wrench
-        moment = (wrench.torque.x, wrench.torque.y) if len(self.model.supports) == 1 else None
-        if self.fit.reading(support, stamp_seconds(stamp.sec, stamp.nanosec),
-                            (wrench.force.x, wrench.force.y), moment):
+    def _on_reading(self, support, data):
+        """Take a WrenchStamped's CDR bytes (raw: 1 us to read, against rclpy's 20 us)."""
+        try:
+            sec, nanosec, force, torque = read_wrench_stamped(data)
+        except (ValueError, struct.error):
+            self.fit.dropped += 1
+            return
+        moment = torque[:2] if len(self.model.supports) == 1 else None
+        if self.fit.reading(support, stamp_seconds(sec, nanosec), force[:2], moment):
             self.readings[support] += 1
 
     def motion(self, sec, nanosec, angle, omega, alpha):
