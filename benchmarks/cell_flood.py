@@ -5,8 +5,8 @@ The node (bundled gantry layout) gets joint_states at --motion-rate (default 1 k
 --seconds, and each of its two cells (supports/front and rear/measured_load) readings at
 --cell-rate (default 2 kHz each: 4 kHz of cells). The publisher is its own process
 (``--publish``), as sensors are. Printed: good motion samples sent, accepted by the
-node (its own count at shutdown), lost (%), cell readings sent, and the node's CPU
-time per second.
+node (its own count at shutdown), lost (%), cell readings sent and taken by the fit
+(the node's count), and the node's CPU time per second.
 
 Run: ./dev.sh run python benchmarks/cell_flood.py [--cell-rate 2000] [--seconds 10]
 """
@@ -111,7 +111,8 @@ def run(motion_rate, cell_rate, seconds, node_root=ROOT):
         log = node.log()
     sent, cells = map(int, re.search(r'sent (\d+) (\d+)', out.stdout).groups())
     accepted = int(re.search(r'motion samples: (\d+) accepted', log)[1])
-    return sent, accepted, cells, cpu
+    taken = re.search(r'load cell readings \(layout in force\): (\d+) front, (\d+) rear', log)
+    return sent, accepted, cells, cpu, (int(taken[1]) + int(taken[2])) if taken else None
 
 
 def main():
@@ -132,12 +133,13 @@ def main():
     roots = [('this', ROOT)] + ([('baseline', args.baseline)] if args.baseline else [])
     for _ in range(args.runs):
         for name, root in roots:
-            sent, accepted, cells, cpu = run(args.motion_rate, args.cell_rate, args.seconds,
-                                             root)
+            sent, accepted, cells, cpu, taken = run(args.motion_rate, args.cell_rate,
+                                                    args.seconds, root)
             lost = 100 * (sent - accepted) / sent
             print(f'{name}: motion {args.motion_rate:g} Hz, cells {2 * args.cell_rate:g} Hz in '
                   f'all: {accepted} of {sent} motion samples answered ({lost:.2f} % lost), '
-                  f'{cells} cell readings sent; node CPU {cpu:.2f} s/s', flush=True)
+                  f'{cells} cell readings sent, {taken} taken by the fit; node CPU '
+                  f'{cpu:.2f} s/s', flush=True)
 
 
 if __name__ == '__main__':

@@ -237,6 +237,11 @@ class BalanceMonitor(Node):
         # print: rosout is gone once a signal has shut the context down.
         print('balance_monitor: motion samples: ' + ', '.join(
             f'{count} {name}' for name, count in self._counts.items()), flush=True)
+        if self._active is not None and any(self._active.cells.readings.values()):
+            cells = self._active.cells
+            print('balance_monitor: load cell readings (layout in force): ' + ', '.join(
+                f'{count} {name}' for name, count in cells.readings.items()) +
+                f', {cells.fit.dropped} dropped', flush=True)
         if self._recorder is not None:
             self._recorder.close()
             self._recorder = None
