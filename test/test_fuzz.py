@@ -239,7 +239,8 @@ def test_the_load_cells_verdict_may_change_level_any_way(node):
                           if topic == '/diagnostics']
             node.captured.messages.clear()
     assert node._internal_errors == 0
-    messages = [array.status[-1].message for array in published]
+    messages = [status.message for array in published for status in array.status
+                if status.name.endswith('measured unbalance')]
     assert messages == [f'cells {level}' for level in levels]
 
 

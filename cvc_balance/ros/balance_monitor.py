@@ -40,6 +40,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
 from cvc_balance.identify.evidence import RESIDUAL_WARN, verdict_of_record
+from cvc_balance.identify.mistakes import static_loads
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import (ENCAPSULATION_LE, JointStateReader, string_message,
                                       WrenchStampedEncoder)
@@ -55,6 +56,7 @@ from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
+from cvc_balance.ros.input_checks import InputChecks
 from cvc_balance.ros.load_cells import LoadCells
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import BagRecorder
@@ -129,6 +131,7 @@ class PreparedLayout:
             self.static = static_unbalance(self.model)
             self.couple = couple_unbalance(self.model)
             self.warnings = layout_warnings(self.layout)
+            self.shares = static_loads(self.model)
 
 
 def prepare_layout(text, source):
@@ -149,7 +152,8 @@ class ActiveLayout:
         self.text, self.source, self.layout = prepared.text, prepared.source, prepared.layout
         self.model, self.digest, self.warnings = prepared.model, prepared.digest, \
             prepared.warnings
-        self.static, self.couple = prepared.static, prepared.couple
+        self.static, self.couple, self.shares = prepared.static, prepared.couple, \
+            prepared.shares
         self.supports = tuple(
             (s.name, node.publisher(topics.support_load(s.name)))
             for s in self.layout.supports)
@@ -194,6 +198,7 @@ class BalanceMonitor(Node):
         self._layout_error = ''
         self._gate = StampGate(self.params['max_stamp_jump'])
         self._joints = JointStateReader(self.params['joint_name'])
+        self._checks = InputChecks()
         # Layouts are parsed and aggregated on their own thread, one at a time, and put in
         # force here; of those that come meanwhile only the newest waits (it wins).
         self._layout_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='layout')
@@ -304,7 +309,8 @@ class BalanceMonitor(Node):
             self._reject(f"joint_states without joint '{self.params['joint_name']}' "
                          'or without its position and velocity')
             return
-        self._process(*sample)
+        if self._process(*sample):
+            self._checks.sample(self._last_time, sample[2], sample[3])
 
     def _on_speed(self, data):
         """Take a Float64's CDR bytes: omega, rad/s, stamped with the receive time."""
@@ -321,23 +327,24 @@ class BalanceMonitor(Node):
         self._process(sec, nanosec, self._integrator.update(time, omega), omega)
 
     def _process(self, sec, nanosec, angle, omega):
-        """Compute and publish the outputs of one motion sample (plain floats)."""
+        """Compute and publish the outputs of one motion sample; return whether it was used."""
         if self._preparing is not None:
             self._take_prepared()       # a new layout takes effect between two samples
         active = self._active
         if active is None:
             self._counts['dropped'] += 1
             self._log_throttled('dropped', 'warning', 'no layout yet: motion samples dropped')
-            return
+            return False
         time, received = stamp_seconds(sec, nanosec), monotonic()
         problem = stamp_problem(sec, nanosec) or \
             sample_problem(time, None, angle, omega, self.params['max_speed']) or \
             self._gate.check(time, received)
         if problem:
             self._reject(f'motion sample: {problem}')
-            return
+            return False
         if self._gate.restarted:         # a new time line: the old slope means nothing
             self._alpha.reset()
+            self._checks.restart()
             self.get_logger().warning(f'motion samples moved to a new time line at {time:.9f} '
                                       's (confirmed by two samples)')
         self._last_time = time
@@ -374,6 +381,7 @@ class BalanceMonitor(Node):
         self._last_input = received
         self._counts['accepted'] += 1
         self._period_accepted += 1
+        return True
 
     def _record_outputs(self, bearing, supports, unbalance, torque):
         now = self.get_clock().now().nanoseconds
@@ -526,6 +534,7 @@ class BalanceMonitor(Node):
                 message += (f'; {rejected} motion samples rejected in the last {period:.2g} s '
                             f'(last: {self._last_rejection})')
             statuses += self._measured_status(active, of_record)
+            statuses.append(self._input_status(active))
             if self._rerun is not None and self._last_time is not None:
                 self._rerun.evidence(int(self._last_time * 1e9), of_record)
             quiet = now - (self._last_input if self._last_input is not None else self._started)
@@ -562,6 +571,18 @@ class BalanceMonitor(Node):
                                   level=LEVELS[level], message=message)
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         return [status]
+
+    def _input_status(self, active):
+        """Return the status of the inputs' own checks (units, senses, cells' supports)."""
+        level, message, values = self._checks.status(active)
+        values['layouts dropped unparsed'] = self._layouts_dropped
+        for severity, text in self._checks.news():
+            self._log_at(severity, text)
+        status = DiagnosticStatus(name='balance_monitor: input checks',
+                                  hardware_id=self.get_fully_qualified_name(),
+                                  level=LEVELS[level], message=message)
+        status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
+        return status
 
     def _log_transition(self, level, message):
         """Log a change of the diagnostics level, once (not every period)."""
