@@ -77,25 +77,35 @@ class MotionCheck:
     finding: Finding
 
 
-def wrap_period(angle):
+def wrap_period(steps):
     """
     Return what a position wraps at: 2 pi, 360, the jump seen, or None when it does not wrap.
 
-    A wrap is a step much longer than the typical one (ten times, and more than pi / 2); the
-    period is the wrap's length plus the typical step, taken as 2 pi or 360 within 10 %.
+    ``steps``: the position's successive differences (pauses left out). A wrap is a step
+    much longer than the typical one (three times, and more than pi / 2); the period is the
+    wrap's length from the step its neighbours make, taken as 2 pi or 360 within 10 %, and
+    as a power of two (an encoder's counts) within 1 %.
     """
-    steps = np.diff(np.asarray(angle, float))
-    if not len(steps):
+    steps = np.asarray(steps, float)
+    if len(steps) < 3:
         return None
     typical = float(np.median(np.abs(steps)))
-    jumps = np.abs(steps) > max(10.0 * typical, math.pi / 2)
-    if not jumps.any():
+    big = np.abs(steps) > max(3.0 * typical, math.pi / 2)
+    if not big.any():
         return None
-    period = float(np.median(np.abs(steps[jumps]))) + typical
+    # A wrap between two ordinary steps (noise at the boundary can wrap back and forth).
+    inner = np.flatnonzero(big[1:-1]) + 1
+    alone = inner[~big[inner - 1] & ~big[inner + 1]]
+    if len(alone):
+        beside = 0.5 * (steps[alone - 1] + steps[alone + 1])
+        period = float(np.median(np.abs(steps[alone] - beside)))
+    else:
+        period = float(np.median(np.abs(steps[big]))) + typical
     for known in (2 * math.pi, 360.0):
         if abs(period - known) <= 0.1 * known:
             return known
-    return period
+    counts = 2.0 ** round(math.log2(period)) if period > 0 else 0.0
+    return counts if abs(period - counts) <= 0.01 * counts else period
 
 
 def motion_units(time, angle, omega):
@@ -105,24 +115,25 @@ def motion_units(time, angle, omega):
     ``time`` s (increasing), ``angle`` the position as sent (rad if right), ``omega`` the
     velocity as sent (rad/s if right). Pauses are left out (:data:`PAUSE`). None when
     the window cannot tell: too few steps, the velocity turned less than
-    :data:`MIN_TURN` rad, or the position moves more than 1/8 of its period a step (too
-    sparse for the speed: the steps may alias).
+    :data:`MIN_TURN` rad, or the samples are too sparse for the speed (the steps may
+    alias): the position moves more than 1/8 of its period a step (2 pi if it is not
+    seen to wrap), or the velocity more than pi / 2 rad.
     """
     time, angle, omega = (np.asarray(a, float) for a in (time, angle, omega))
     if len(time) < MIN_STEPS + 1:
         return None
-    period = wrap_period(angle)
-    steps = np.diff(angle)
-    if period is not None:
-        steps = np.remainder(steps + period / 2, period) - period / 2
-    spacing = np.diff(time)
+    steps, spacing = np.diff(angle), np.diff(time)
     implied = 0.5 * (omega[1:] + omega[:-1]) * spacing
     keep = (spacing <= PAUSE * np.median(spacing)) & np.isfinite(steps) & np.isfinite(implied)
+    period = wrap_period(steps[keep])
+    if period is not None:
+        steps = np.remainder(steps + period / 2, period) - period / 2
     turned = float(implied[keep].sum())
     if keep.sum() < MIN_STEPS or abs(turned) < MIN_TURN:
         return None
-    if period is not None and np.median(np.abs(steps[keep])) > period / 8:
-        return None             # samples too sparse for the speed: the steps may alias
+    if np.median(np.abs(steps[keep])) > (period or 2 * math.pi) / 8 or \
+            np.median(np.abs(implied[keep])) > math.pi / 2:
+        return None             # too sparse for the speed: the steps may alias
     ratio = float(steps[keep].sum()) / turned
     return MotionCheck(ratio, period, turned, _motion_finding(ratio, period))
 
