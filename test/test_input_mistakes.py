@@ -12,6 +12,7 @@ correct motion streams and 200 correct cell setups drawn at random (seeded), no 
 
 import math
 
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 import yaml
@@ -33,6 +34,8 @@ def model_of(layout):
 
 def test_static_shares_are_the_lever_rule_by_hand():
     """
+    The weight shares of a layout by the lever rule.
+
     Two masses, 30 kg at z 0.1 m and 10 kg at z -0.3 m (off the axis, any angle):
     centre of mass at z 0; supports at -0.2 and 0.5 m carry 0.5/0.7 and 0.2/0.7 of
     40 kg x 9.80665 m/s^2, downwards (-y); one support carries it all.
@@ -56,7 +59,7 @@ def test_static_shares_are_the_lever_rule_by_hand():
 # -- position against velocity ----------------------------------------------------------
 
 def joint_stream(rate=1000.0, seconds=2.0, omega0=8.0, alpha=6.0, noise=1e-3, seed=0):
-    """A true motion by hand: stamps s, angle rad (unbounded), omega rad/s; noisy."""
+    """Return a true motion by hand: stamps s, angle rad (unbounded), omega rad/s; noisy."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(rate * seconds)) / rate
     q = 0.3 + omega0 * t + 0.5 * alpha * t * t
@@ -131,7 +134,10 @@ def test_motion_that_cannot_tell_says_nothing():
 
 def test_200_correct_motion_streams_raise_no_alarm():
     """
-    Random rates (50-5000 Hz), speeds (0.2-300 rad/s, either sense, ramps), encoder
+    Correct joint streams drawn at random: no finding.
+
+    Random rates (50-5000 Hz), speeds (0.2-300 rad/s, either sense, ramps, spin-ups from
+    rest at 2-50 rad/s^2), encoder
     noise (0-3 mrad), speed noise (0-1 %), stamp jitter, pauses, and positions wrapped
     at +-pi, 0..2 pi or not at all: no finding; and most streams are judged (ratio 1).
     """
@@ -145,6 +151,8 @@ def test_200_correct_motion_streams_raise_no_alarm():
             t[n // 2:] += rng.uniform(0.1, 5.0)
         omega0 = float(np.exp(rng.uniform(np.log(0.2), np.log(300.0)))) * rng.choice([-1, 1])
         alpha = rng.uniform(-1.0, 1.0) * abs(omega0) / max(t[-1], 1e-3) * 0.5
+        if k % 4 == 3:                                              # a spin-up from rest
+            omega0, alpha = 0.0, float(rng.uniform(2.0, 50.0) * rng.choice([-1, 1]))
         q = rng.uniform(-3, 3) + omega0 * t + 0.5 * alpha * t * t
         w = (omega0 + alpha * t) * (1 + rng.normal(0, rng.uniform(0, 0.01), n))
         q = q + rng.normal(0, rng.uniform(0, 3e-3), n)
@@ -256,7 +264,7 @@ def asymmetric_run():
 
 
 def shares_by_hand():
-    """The lever rule: 342 kg, centre of mass at z (40 x 0.08 - 2 x 0.1) / 342, tilt 8 deg."""
+    """Return the lever rule's shares: 342 kg, centre of mass at z 0.00877 m, tilt 8 deg."""
     mass = 342.0
     z_c = (40.0 * 0.08 - 2.0 * 0.1) / mass
     radial = mass * G * math.cos(math.radians(8.0))
@@ -298,6 +306,8 @@ def test_each_cell_mistake_is_named(name, asymmetric_run):
 
 def test_200_correct_cell_setups_raise_no_alarm():
     """
+    Correct cell setups drawn at random: no finding.
+
     Random layouts (2-5 components, 5-400 kg, radii to 0.7 m, z within the supports),
     supports (one or two, spans 0.15-1 m), tilts (0-30 deg), speeds (3-30 rad/s), zero
     offsets up to 4 % of the weight, noise 0-2 % of it: the fitted static loads match
@@ -328,3 +338,123 @@ def test_200_correct_cell_setups_raise_no_alarm():
         assert found == [], (k, found)
         judged += sum(abs(v) >= 0.2 * abs(sum(expected.values())) for v in expected.values())
     assert judged >= 250, judged
+
+
+# -- live: the node names the mistake in /diagnostics and its log, once --------------------
+
+def input_status(probe):
+    """Return the node's last 'input checks' status: (level, message, values) or None."""
+    for array in reversed(probe.received['/diagnostics']):
+        for status in array.status:
+            if status.name.endswith('input checks'):
+                return status.level, status.message, {kv.key: kv.value for kv in status.values}
+    return None
+
+
+def stream_live(probe, seconds, joints=None, cells=None, rate=500.0):
+    """
+    Publish for ``seconds`` at ``rate``, stamped on the wall clock's line.
+
+    ``joints(t)`` gives a JointState, ``cells(t)`` [(publisher, WrenchStamped)]; t s from
+    the start, each stamped at the start's wall time plus t.
+    """
+    import time
+    start, k, wall = time.monotonic(), 0, time.time_ns()
+    while time.monotonic() - start < seconds:
+        t = k / rate
+        stamp = wall + round(t * 1e9)         # the time the position and readings are of
+        for publisher, msg in ([(probe.joints, joints(t))] if joints else []) + \
+                (cells(t) if cells else []):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            publisher.publish(msg)
+        k += 1
+        probe.spin_for(max(0.0, start + k / rate - time.monotonic()))
+
+
+def joint_msg(position, velocity):
+    from sensor_msgs.msg import JointState
+    return JointState(name=['spin'], position=[position], velocity=[velocity])
+
+
+def live_node(tmp_path, layout):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from sensor_msgs.msg import JointState
+    from ros_harness import Probe
+    from test_balance_monitor import start_node, wait_until_connected
+    node = start_node(tmp_path, layout)
+    probe = Probe('mistakes_probe')
+    probe.record(DiagnosticArray, '/diagnostics')
+    probe.joints = probe.publisher(JointState, 'joint_states', sensor=True)
+    return node, probe, wait_until_connected
+
+
+def test_live_position_in_degrees_is_named_once(tmp_path):
+    """A JointState position in degrees (velocity in rad/s), 1.2 s at 500 Hz."""
+    import signal
+    node, probe, wait_until_connected = live_node(tmp_path, ASYMMETRIC)
+    message = ('joint position looks like degrees: its rate is 57.3 x the velocity, and it '
+               'wraps at 360')
+    try:
+        wait_until_connected(probe, node, 'joint_states')
+        stream_live(probe, 1.2, joints=lambda t: joint_msg(
+            math.degrees(wrapped(20.0 * t, start=0.0)), 20.0))
+        assert probe.spin_until(lambda: (input_status(probe) or (0,))[0] ==
+                                DiagnosticStatus.WARN, 5.0), \
+            (input_status(probe), node.log()[-2000:])
+        level, said, values = input_status(probe)
+        assert said == message
+        assert float(values['joint position rate / velocity']) == pytest.approx(57.2958,
+                                                                                rel=1e-3)
+        assert values['joint position wraps at'] == '360'
+    finally:
+        probe.close()
+    assert node.stop(signal.SIGINT) == 0
+    assert node.log().count(f'input mistake? {message}') == 1, node.log()
+
+
+def test_live_swapped_cells_are_named(tmp_path):
+    """
+    Two cells on each other's topics, named live.
+
+    The two cells' topics swapped (readings by Pinocchio and statics), 2 s: the node's fit
+    finds each cell's static load at the other support's share and names the swap.
+    """
+    import signal
+    from geometry_msgs.msg import WrenchStamped
+    rotor = PinocchioRotor(ASYMMETRIC)
+    node, probe, wait_until_connected = live_node(tmp_path, ASYMMETRIC)
+    cell_pubs = {name: probe.publisher(WrenchStamped, f'supports/{name}/measured_load',
+                                       sensor=True) for name in ('front', 'rear')}
+    omega = 20.0
+
+    def cells(t):
+        out = []
+        loads = rotor.loads(omega * t, omega, 0.0)['supports']
+        for name, topic in (('front', 'rear'), ('rear', 'front')):      # swapped
+            msg = WrenchStamped()
+            (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z) = \
+                (float(v) for v in loads[name][0])
+            out.append((cell_pubs[topic], msg))
+        return out
+
+    try:
+        wait_until_connected(probe, node, 'joint_states', 'supports/front/measured_load',
+                             'supports/rear/measured_load')
+        stream_live(probe, 2.0, joints=lambda t: joint_msg(wrapped(omega * t), omega),
+                    cells=cells)
+        assert probe.spin_until(lambda: (input_status(probe) or (0,))[0] ==
+                                DiagnosticStatus.WARN, 5.0), \
+            (input_status(probe), node.log()[-2000:])
+        level, said, values = input_status(probe)
+    finally:
+        probe.close()
+    assert node.stop(signal.SIGINT) == 0
+    shares = shares_by_hand()
+    assert said == (f"cells front and rear look swapped: front reads the rear support's "
+                    f"static load ({float(values['cell front static load [N]']):.0f} N where "
+                    f"front carries {shares['front']:.0f} N) and rear reads front's")
+    assert float(values['cell front static load [N]']) == pytest.approx(shares['rear'],
+                                                                        rel=0.02)
+    assert float(values['cell rear static load [N]']) == pytest.approx(shares['front'],
+                                                                       rel=0.02)
+    assert f'input mistake? {said}' in node.log()

@@ -39,8 +39,8 @@ MIN_TURN = 1.0
 """rad the velocity must have turned over the window (the ratio is judged from it)."""
 MIN_STEPS = 20
 """Steps a window must hold to be judged."""
-PAUSE = 5.0
-"""A step longer than this many typical steps (a pause) is left out: it may alias."""
+MAX_STEP = math.pi / 2
+"""rad: a step over which the velocity turns further (a pause) is left out: it may alias."""
 SHARE_TOLERANCE = 0.25
 """A cell's static load may differ from its support's share by this fraction of the share..."""
 ZERO_TOLERANCE = 0.05
@@ -113,26 +113,29 @@ def motion_units(time, angle, omega):
     Compare a joint's position with its velocity over a window; return a MotionCheck or None.
 
     ``time`` s (increasing), ``angle`` the position as sent (rad if right), ``omega`` the
-    velocity as sent (rad/s if right). Pauses are left out (:data:`PAUSE`). None when
-    the window cannot tell: too few steps, the velocity turned less than
-    :data:`MIN_TURN` rad, or the samples are too sparse for the speed (the steps may
-    alias): the position moves more than 1/8 of its period a step (2 pi if it is not
-    seen to wrap), or the velocity more than pi / 2 rad.
+    velocity as sent (rad/s if right). Steps over which the velocity turns more than
+    :data:`MAX_STEP` (pauses) are left out. None when the window cannot tell: too few
+    steps, the velocity turned less than :data:`MIN_TURN` rad, or the position moves more
+    than 1/8 of its period a step (2 pi if it is not seen to wrap: samples too sparse for
+    the speed, the steps may alias).
     """
     time, angle, omega = (np.asarray(a, float) for a in (time, angle, omega))
     if len(time) < MIN_STEPS + 1:
         return None
     steps, spacing = np.diff(angle), np.diff(time)
     implied = 0.5 * (omega[1:] + omega[:-1]) * spacing
-    keep = (spacing <= PAUSE * np.median(spacing)) & np.isfinite(steps) & np.isfinite(implied)
-    period = wrap_period(steps[keep])
+    keep = (np.abs(implied) <= MAX_STEP) & np.isfinite(steps)
+    # The wrap is seen on the regular steps: one over a pause holds motion besides.
+    period = wrap_period(steps[keep & (spacing <= 5.0 * np.median(spacing))])
     if period is not None:
         steps = np.remainder(steps + period / 2, period) - period / 2
+    # What is left a jump was not explained by a wrap seen (one over a pause, a glitch).
+    keep &= np.abs(steps) <= max(3.0 * np.median(np.abs(steps[keep])) if keep.any() else 0.0,
+                                 math.pi / 2)
     turned = float(implied[keep].sum())
     if keep.sum() < MIN_STEPS or abs(turned) < MIN_TURN:
         return None
-    if np.median(np.abs(steps[keep])) > (period or 2 * math.pi) / 8 or \
-            np.median(np.abs(implied[keep])) > math.pi / 2:
+    if np.median(np.abs(steps[keep])) > (period or 2 * math.pi) / 8:
         return None             # too sparse for the speed: the steps may alias
     ratio = float(steps[keep].sum()) / turned
     return MotionCheck(ratio, period, turned, _motion_finding(ratio, period))
