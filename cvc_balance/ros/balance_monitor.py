@@ -42,8 +42,8 @@ from std_msgs.msg import Float64, String
 from cvc_balance.identify.evidence import RESIDUAL_WARN, verdict_of_record
 from cvc_balance.identify.mistakes import static_loads
 from cvc_balance.messages import topics
-from cvc_balance.messages.cdr import (ENCAPSULATION_LE, JointStateReader, string_message,
-                                      WrenchStampedEncoder)
+from cvc_balance.messages.cdr import (ENCAPSULATION_LE, joint_state_names, JointStateReader,
+                                      string_message, WrenchStampedEncoder)
 from cvc_balance.physics import assessment
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees_360, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
@@ -102,15 +102,44 @@ PARAMETERS = (
      'subscriptions', (1, 10000)),
     ('record_path', '', 'record inputs, outputs and diagnostics to this MCAP bag; empty: '
      'no recording', None),
-    ('machine_id', '', 'the machine monitored (serial number, asset tag), written into the '
-     "recording (MCAP metadata, metadata.yaml custom_data) for cvc-balance fleet; empty: "
-     'none', None),
+    ('machine_id', '', 'the machine monitored (serial number, asset tag): the hardware_id '
+     'of the /diagnostics statuses, and written into the recording (MCAP metadata, '
+     "metadata.yaml custom_data) for cvc-balance fleet; empty: none (hardware_id: the node's "
+     'name)', None),
     ('rerun', '', 'rerun view of the run: save (to rerun_target, an .rrd), connect (to the '
      'viewer at rerun_target) or spawn (a viewer); empty: off', None),
     ('rerun_target', '', '.rrd path (save) or viewer URL (connect)', None),
     ('rerun_every', 20, 'log every n-th sample to rerun (the viewer need not draw 1 kHz)',
      (1, 100000)),
 )
+
+
+TOPICS = (
+    # name (relative: namespaces and remapping apply), type, in/out, what it carries
+    (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, 'in', 'best effort: the joint joint_name, '
+     "position = rotor angle q (rad), velocity = omega (rad/s); the header stamp is the "
+     "sample's time"),
+    (topics.SPEED, topics.FLOAT64_TYPE, 'in', 'best effort: omega (rad/s) when no joint_states '
+     'come; q is integrated over the receive times'),
+    (topics.LAYOUT, topics.STRING_TYPE, 'in', 'reliable, transient local: the layout (YAML or '
+     'JSON); one is parsed at a time and of those that come meanwhile the newest wins'),
+    (topics.measured_load('<name>'), topics.WRENCH_TYPE, 'in', 'best effort: a load cell under '
+     "support <name> (stator frame, N; a single support's tilting moment, N m)"),
+    (topics.BEARING_LOAD, topics.WRENCH_TYPE, 'out', 'the load on the stator (stator frame, N '
+     "and N m about O); stamp: the motion sample's"),
+    (topics.support_load('<name>'), topics.WRENCH_TYPE, 'out', "each support's load (stator "
+     'frame)'),
+    (topics.UNBALANCE, topics.WRENCH_TYPE, 'out', "the layout's unbalance (rotor frame: force "
+     'U omega^2, torque the couple moment)'),
+    (topics.DRIVE_TORQUE, topics.WRENCH_TYPE, 'out', 'the drive torque (rotor frame, torque.z)'),
+    (topics.IDENTIFIED_UNBALANCE, topics.WRENCH_TYPE, 'out', 'the unbalance the load cells '
+     'measure, at each revolution (as unbalance)'),
+    (topics.UNBALANCE_RESIDUAL, topics.WRENCH_TYPE, 'out', 'measured - layout unbalance, at '
+     'each revolution'),
+    (topics.DIAGNOSTICS, topics.DIAGNOSTIC_ARRAY_TYPE, 'out', 'every diagnostics_period: the '
+     "verdict of record, the load cells' measurement, the input checks"),
+)
+"""The node's topics: what --help lists, and what the node subscribes and publishes."""
 
 
 class PreparedLayout:
@@ -168,6 +197,11 @@ class BalanceMonitor(Node):
         """Declare parameters, topics and the diagnostics timer; load layout_file if set."""
         super().__init__('balance_monitor', **kwargs)
         self.params = self._declare_parameters()
+        # The machine monitored, else this node: what aggregators group the statuses by.
+        self._hardware_id = self.params['machine_id'] or self.get_fully_qualified_name()
+        # Where the inputs are looked for, after namespace and remapping: said in refusals.
+        self._resolved = {name: self.resolve_topic_name(name)
+                          for name in (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT)}
         self._wrench_publishers = {}
         self._bearing_pub = self.publisher(topics.BEARING_LOAD)
         self._unbalance_pub = self.publisher(topics.UNBALANCE)
@@ -306,11 +340,35 @@ class BalanceMonitor(Node):
                          f'{one_line(error, 100)}')
             return
         if sample is None:
-            self._reject(f"joint_states without joint '{self.params['joint_name']}' "
-                         'or without its position and velocity')
+            self._reject(self._without_joint(data))
             return
         if self._process(*sample):
             self._checks.sample(self._last_time, sample[2], sample[3])
+
+    def _without_joint(self, data):
+        """Say what a JointState without a usable joint_name sample has instead."""
+        joint, topic = self.params['joint_name'], self._resolved[topics.JOINT_STATES]
+        names = joint_state_names(data)[0]
+        if joint in names:
+            return f"{topic}: joint '{joint}' has no position or velocity"
+        shown = ', '.join(repr(name) for name in names[:8])
+        shown += ', ...' if len(names) > 8 else ''
+        return (f"{topic} without joint '{joint}' (it names {shown or 'no joint'}): set the "
+                'parameter joint_name')
+
+    def _motion_topics(self):
+        """Name where motion samples are awaited, and where JointState is, if not there."""
+        joint, speed = self._resolved[topics.JOINT_STATES], self._resolved[topics.SPEED]
+        text = f'{joint} or {speed}'
+        if self.count_publishers(joint) or self.count_publishers(speed):
+            return text
+        elsewhere = sorted(name for name, types in self.get_topic_names_and_types()
+                           if topics.JOINT_STATE_TYPE in types and name != joint)
+        text += ', where nothing publishes'
+        if elsewhere:
+            text += (f"; JointState is published on {', '.join(elsewhere[:3])}: remap with "
+                     f'-r {topics.JOINT_STATES}:={elsewhere[0]}')
+        return text
 
     def _on_speed(self, data):
         """Take a Float64's CDR bytes: omega, rad/s, stamped with the receive time."""
@@ -508,8 +566,8 @@ class BalanceMonitor(Node):
 
     def _publish_diagnostics(self):
         now = monotonic()
-        status = DiagnosticStatus(name='balance_monitor: rotor balance',
-                                  hardware_id=self.get_fully_qualified_name())
+        status = DiagnosticStatus(name=self._status_name('rotor balance'),
+                                  hardware_id=self._hardware_id)
         values = {'accepted': self._counts['accepted'], 'rejected': self._counts['rejected'],
                   'dropped': self._counts['dropped'],
                   'input rate [Hz]': self._period_accepted / max(now - self._period_start, 1e-9),
@@ -524,8 +582,8 @@ class BalanceMonitor(Node):
         active = self._active
         statuses = [status]
         if active is None:
-            level, message = DiagnosticStatus.WARN, 'no layout (waiting for one on the ' \
-                f'{topics.LAYOUT} topic)'
+            level, message = DiagnosticStatus.WARN, 'no layout (waiting for one on ' \
+                f'{self._resolved[topics.LAYOUT]}, or set layout_file)'
         else:
             level, message, balance, of_record = self._judge(active)
             values.update(balance)
@@ -543,7 +601,7 @@ class BalanceMonitor(Node):
                 waited = 'no motion sample yet' if self._last_input is None else \
                     f'no motion sample for {quiet:.1f} s'
                 level, message = DiagnosticStatus.STALE, \
-                    f"{waited} on {topics.JOINT_STATES} or {topics.SPEED} (stale after " \
+                    f"{waited} on {self._motion_topics()} (stale after " \
                     f"{self.params['stale_after']:g} s); {message}"
         if self._layout_error:
             # In full under 'last rejected layout'; the headline stays one readable line.
@@ -566,8 +624,8 @@ class BalanceMonitor(Node):
             self._reported_measured = level
             self._log_at({assessment.ERROR: 'error', assessment.WARN: 'warning'}.get(
                 level, 'info'), f'load cells {level}: {message}')
-        status = DiagnosticStatus(name='balance_monitor: measured unbalance',
-                                  hardware_id=self.get_fully_qualified_name(),
+        status = DiagnosticStatus(name=self._status_name('measured unbalance'),
+                                  hardware_id=self._hardware_id,
                                   level=LEVELS[level], message=message)
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         return [status]
@@ -578,11 +636,15 @@ class BalanceMonitor(Node):
         values['layouts dropped unparsed'] = self._layouts_dropped
         for severity, text in self._checks.news():
             self._log_at(severity, text)
-        status = DiagnosticStatus(name='balance_monitor: input checks',
-                                  hardware_id=self.get_fully_qualified_name(),
+        status = DiagnosticStatus(name=self._status_name('input checks'),
+                                  hardware_id=self._hardware_id,
                                   level=LEVELS[level], message=message)
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
         return status
+
+    def _status_name(self, what):
+        """Name a diagnostic status after the node: '/gantry1/balance_monitor: what'."""
+        return f'{self.get_fully_qualified_name()}: {what}'
 
     def _log_transition(self, level, message):
         """Log a change of the diagnostics level, once (not every period)."""
@@ -695,20 +757,23 @@ def _text(value):
 
 
 def usage():
-    """Return the node's --help: what it does, its topics and parameters."""
+    """Return the node's --help: what it does, its topics and parameters (their declarations)."""
     lines = ['usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] [--params-file FILE] '
              '[-r FROM:=TO] ...]',
              '',
              'ROS 2 node balance_monitor: bearing loads, drive torque and unbalance of a rotor',
              'from its encoder (joint_states or speed) and its component layout, with the',
-             'ISO 21940-11 verdict on /diagnostics. Runs until SIGINT or SIGTERM.',
-             '',
-             f'inputs: {topics.JOINT_STATES} (sensor_msgs/JointState), {topics.SPEED} '
-             f'(std_msgs/Float64), {topics.LAYOUT} (std_msgs/String, latched)',
-             f'outputs: {topics.BEARING_LOAD}, supports/<name>/load, {topics.UNBALANCE}, '
-             f'{topics.DRIVE_TORQUE} (geometry_msgs/WrenchStamped), {topics.DIAGNOSTICS}',
-             '',
-             'parameters (-p NAME:=VALUE after --ros-args; config/balance_monitor.yaml):']
+             'ISO 21940-11 verdict on /diagnostics. Runs until SIGINT or SIGTERM. Topic names',
+             'are relative: -r __ns:=/gantry1 puts them under /gantry1, -r joint_states:=/x',
+             'remaps one. <name>: each support of the layout in force.',
+             '']
+    for direction, heading in (('in', 'inputs'), ('out', 'outputs')):
+        lines.append(f'{heading}:')
+        for name, kind, way, description in TOPICS:
+            if way == direction:
+                lines.append(f'  {name} ({kind}): {description}')
+    lines += ['', 'parameters (-p NAME:=VALUE after --ros-args, or --params-file FILE: '
+              'config/balance_monitor.yaml, keyed /** for any name and namespace):']
     for name, default, description, bounds in PARAMETERS:
         limits = f', {bounds[0]:g} to {bounds[1]:g}' if bounds else ''
         lines.append(f'  {name} (default {default!r}{limits}): {description}')
