@@ -37,18 +37,35 @@ def outputs(path):
     return result
 
 
-@pytest.mark.parametrize('name, record', [('spin_up_tube_swap', False), ('tilted_shift', True)])
-def test_live_and_offline_replay_agree(name, record, tmp_path):
-    bag = ROOT / 'bags' / f'{name}.mcap'
-    extra = ['-p', f'record_path:={tmp_path / "node.mcap"}'] if record else []
-    node = NodeProcess('cvc_balance.ros.balance_monitor', extra, tmp_path / 'node.log')
+def played(bag, tmp_path, extra=()):
+    """Play ``bag`` into a node process (ROS arguments ``extra``); return (its log, live bag)."""
+    node = NodeProcess('cvc_balance.ros.balance_monitor', list(extra), tmp_path / 'node.log')
     live = tmp_path / 'live.mcap'
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
                           str(live), '--wait', '60'], env=ros_environment(),
                          capture_output=True, text=True, timeout=180)
     assert run.returncode == 0, run.stderr
     assert node.stop(signal.SIGINT) == 0
-    log = node.log()
+    return node.log(), live
+
+
+def assert_same_outputs(got, expected):
+    """Every output once, equal to 4e-15 of its peak (the drive torque 2e-12)."""
+    assert got.keys() == expected.keys()
+    for topic, (stamps, values) in expected.items():
+        live_stamps, live_values = got[topic]
+        assert np.array_equal(np.sort(live_stamps), stamps), topic    # every sample, once
+        order = np.argsort(live_stamps)
+        scale = np.abs(values).max()
+        bound = 2e-12 if topic == '/drive_torque' else 4e-15
+        assert np.abs(live_values[order] - values).max() <= bound * scale, topic
+
+
+@pytest.mark.parametrize('name, record', [('spin_up_tube_swap', False), ('tilted_shift', True)])
+def test_live_and_offline_replay_agree(name, record, tmp_path):
+    bag = ROOT / 'bags' / f'{name}.mcap'
+    extra = ['-p', f'record_path:={tmp_path / "node.mcap"}'] if record else []
+    log, live = played(bag, tmp_path, extra)
     offline = tmp_path / 'offline.mcap'
     summary = replay(bag, offline)
     assert f'{summary.accepted} accepted, 0 rejected, 0 dropped' in log, log
@@ -63,14 +80,7 @@ def test_live_and_offline_replay_agree(name, record, tmp_path):
     got, expected = outputs(live), outputs(offline)
     assert {t: sorted(s) for t, s in by_rosbags.items()} == \
         {t: sorted(s.tolist()) for t, (s, _) in got.items()}
-    assert got.keys() == expected.keys()
-    for topic, (stamps, values) in expected.items():
-        live_stamps, live_values = got[topic]
-        assert np.array_equal(np.sort(live_stamps), stamps), topic    # every sample, once
-        order = np.argsort(live_stamps)
-        scale = np.abs(values).max()
-        bound = 2e-12 if topic == '/drive_torque' else 4e-15
-        assert np.abs(live_values[order] - values).max() <= bound * scale, topic
+    assert_same_outputs(got, expected)
     if record:
         recorded = Bag(tmp_path / 'node.mcap')
         assert not recorded.problems       # the node finalised its recording on SIGINT
@@ -150,24 +160,13 @@ def test_bad_stamps_and_a_pause_are_judged_alike_live_and_offline(tmp_path):
     """
     bag = tmp_path / 'hostile.mcap'
     good = hostile_time_line_bag(bag)
-    node = NodeProcess('cvc_balance.ros.balance_monitor', [], tmp_path / 'node.log')
-    live = tmp_path / 'live.mcap'
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
-                          str(live), '--wait', '60'], env=ros_environment(),
-                         capture_output=True, text=True, timeout=180)
-    assert run.returncode == 0, run.stderr
-    assert node.stop(signal.SIGINT) == 0
-    log = node.log()
+    log, live = played(bag, tmp_path)
     assert 'motion samples: 400 accepted, 4 rejected, 0 dropped' in log, log
     summary = replay(bag, tmp_path / 'offline.mcap')
     assert (summary.accepted, summary.rejected) == (400, 4)
     got, expected = outputs(live), outputs(tmp_path / 'offline.mcap')
     assert got.keys() == expected.keys() == {'/bearing_load', '/unbalance', '/drive_torque',
                                              '/supports/front/load', '/supports/rear/load'}
-    for topic, (stamps, values) in expected.items():
+    for topic, (stamps, _) in expected.items():
         assert stamps.tolist() == good, topic
-        order = np.argsort(got[topic][0])
-        assert got[topic][0][order].tolist() == good, topic
-        scale = np.abs(values).max()
-        bound = 2e-12 if topic == '/drive_torque' else 4e-15
-        assert np.abs(got[topic][1][order] - values).max() <= bound * scale, topic
+    assert_same_outputs(got, expected)
