@@ -7,20 +7,22 @@ callback, with no timer in between. The per-message path is plain Python
 floats (:func:`cvc_balance.physics.engine.sample_loads`), O(1) in the number of
 components; layout aggregates are computed once per layout.
 
-Subscriptions (relative names): ``joint_states`` (sensor_msgs/JointState,
-sensor-data QoS), ``speed`` (std_msgs/Float64, rad/s; q integrated from
-receive times), ``layout`` (std_msgs/String, YAML or JSON, transient local).
-Publications (geometry_msgs/WrenchStamped, stamp = input sample's stamp):
-``bearing_load`` and ``supports/<name>/load`` (stator frame, N and N m),
-``unbalance`` (rotor frame: force = U omega^2, torque = couple moment),
-``drive_torque`` (rotor frame, torque.z). ``/diagnostics`` every period and at
+Topics: :data:`TOPICS` (what ``--help`` lists). The motion and cell inputs are read as
+raw CDR bytes (:mod:`cvc_balance.messages.cdr`): rclpy's message objects cost 15-20 us
+each, and a load-cell flood cost motion samples. Stamps go through a
+:class:`~cvc_balance.physics.motion.StampGate` on the monotonic receive clock. Layouts
+are parsed on a worker thread, one at a time; of those that come meanwhile the newest
+waits, the others are dropped (logged). ``/diagnostics`` every period and at
 each layout change: the verdict of record first (one definition,
 :func:`cvc_balance.identify.evidence.verdict_of_record`: the ISO 21940-11 verdict of the
 rotor the load cells measure once they can tell, else the layout's, labelled; a rotor
 that is not what its layout says is a WARN at least), what the layout expects, the
 layout's plausibility warnings, the node's counts; STALE when no motion sample came for
-``stale_after`` seconds. Changes of that level are logged once each (WARN and STALE as
-warnings, ERROR as an error, back to OK as info).
+``stale_after`` seconds (naming the resolved topics); the load cells' measurement; the
+input checks (:mod:`cvc_balance.ros.input_checks`: units, senses, the cells' supports).
+Statuses are named after the node's fully qualified name, ``hardware_id`` is
+``machine_id``. Changes of the level are logged once each (WARN and STALE as warnings,
+ERROR as an error, back to OK as info).
 """
 
 from concurrent.futures import ThreadPoolExecutor
