@@ -94,8 +94,7 @@ def test_under_a_namespace_with_the_shipped_parameters_file(tmp_path):
         wrong = JointState(name=['a', 'b'], position=[0.0, 0.0], velocity=[1.0, 1.0])
         wrong.header.stamp.sec, wrong.header.stamp.nanosec = divmod(time.time_ns(), 10**9)
         joints.publish(wrong)
-        refusal = ("/gantry1/joint_states without joint 'spin' (it names 'a', 'b'): set the "
-                   'parameter joint_name')
+        refusal = "/gantry1/joint_states without joint 'spin' (it names 'a', 'b'): set joint_name"
         assert probe.spin_until(lambda: any(kv.value == refusal for s in statuses(probe)
                                             for kv in s.values), 10.0), node.log()
         for k in range(50):

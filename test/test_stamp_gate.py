@@ -74,8 +74,8 @@ def test_no_run_of_agreeing_stamps_creeps_ahead_of_the_receive_clock():
     for stamp, receive in samples[:2]:
         assert gate.check(stamp, receive) is None
     assert gate.check(*samples[2]) == (
-        "stamp 11.820000000 s runs 1.7998 s ahead of the receive clock's time line (more "
-        'than max_stamp_jump 1 s; stamps faster than real time?)')
+        'stamp 11.820000000 s runs 1.8 s ahead of the receive clock (max_stamp_jump 1 s; '
+        'stamps faster than real time?)')
 
 
 def test_the_gates_words_name_what_was_seen():
@@ -85,15 +85,15 @@ def test_the_gates_words_name_what_was_seen():
     assert gate.check(1.5, 100.5) == 'stamp 1.500000000 s not after the previous 2.000000000 s'
     assert gate.check(2.0, 100.5) == 'stamp 2.000000000 s not after the previous 2.000000000 s'
     assert gate.check(6.0, 100.5) == (
-        'stamp 6.000000000 s jumps 4 s past the previous, received 0.5 s after it (more than '
-        'max_stamp_jump 1 s ahead of the receive clock)')
+        'stamp 6.000000000 s jumps 4 s past the previous, received 0.5 s after it '
+        '(max_stamp_jump 1 s)')
     # 0.75 s ahead at 101 s: the line's offset moves up by 1 % of the 1 s elapsed, to
     # -97.99 s; 4.6 s at 101.5 s is then 1.09 - 0.005 s ahead.
     assert gate.check(3.75, 101.0) is None
     assert gate.offset == pytest.approx(-97.99, abs=1e-12)
     assert gate.check(4.6, 101.5) == (
-        "stamp 4.600000000 s runs 1.085 s ahead of the receive clock's time line (more "
-        'than max_stamp_jump 1 s; stamps faster than real time?)')
+        'stamp 4.600000000 s runs 1.08 s ahead of the receive clock (max_stamp_jump 1 s; '
+        'stamps faster than real time?)')
     assert gate.check(0.0, 102.0) == 'stamp 0.000000000 s: unset (0) or before 0'
     assert StampGate().max_jump == math.inf
     with pytest.raises(ValueError, match=r'^max_jump must be > 0 s, got 0$'):

@@ -353,10 +353,8 @@ class BalanceMonitor(Node):
         names = joint_state_names(data)[0]
         if joint in names:
             return f"{topic}: joint '{joint}' has no position or velocity"
-        shown = ', '.join(repr(name) for name in names[:8])
-        shown += ', ...' if len(names) > 8 else ''
-        return (f"{topic} without joint '{joint}' (it names {shown or 'no joint'}): set the "
-                'parameter joint_name')
+        shown = one_line(', '.join(repr(name) for name in names), 60) or 'no joint'
+        return f"{topic} without joint '{joint}' (it names {shown}): set joint_name"
 
     def _motion_topics(self):
         """Name where motion samples are awaited, and where JointState is, if not there."""
@@ -458,7 +456,8 @@ class BalanceMonitor(Node):
     def _reject(self, reason):
         self._counts['rejected'] += 1
         self._period_rejected += 1
-        self._last_rejection = reason
+        # Cut: the reason goes into the status headline, which must stay one readable line.
+        self._last_rejection = reason if len(reason) <= 150 else one_line(reason, 150)
         self._log_throttled('rejected', 'warning', f'rejected {reason}')
 
     def _log_throttled(self, key, severity, message):
