@@ -5,6 +5,7 @@
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
 #   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer headless, at 6.5 s of the bag)
+#   ./dev.sh docs      build the documentation site (Sphinx, warnings as errors); prints index.html
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 venv="$here/.venv"
@@ -129,6 +130,14 @@ screenshot() {
   rm -rf "$work"
 }
 
+docs() {
+  # The site from docs/ (MyST Markdown); the reference pages are written from the code at
+  # build time. Warnings are errors: a broken link or a stale page fails the build.
+  local out="$here/docs/_build/html"
+  in_venv python -m sphinx -W --keep-going -q -b html "$here/docs" "$out" >&2
+  echo "$out/index.html"
+}
+
 cmd="${1:-}"
 shift || true
 case "$cmd" in
@@ -147,7 +156,10 @@ case "$cmd" in
   screenshot)
     setup
     screenshot ;;
+  docs)
+    setup
+    docs ;;
   *)
-    sed -n '2,7p' "$0" >&2
+    sed -n '2,8p' "$0" >&2
     exit 2 ;;
 esac

@@ -8,7 +8,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [str(ROOT / 'cvc_balance'), str(ROOT / 'test'), str(ROOT / 'benchmarks'),
-           str(ROOT / 'setup.py')]
+           str(ROOT / 'setup.py'), str(ROOT / 'docs' / 'conf.py'), str(ROOT / 'docs' / '_ext')]
 
 
 @pytest.mark.linter

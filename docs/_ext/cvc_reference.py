@@ -1,0 +1,97 @@
+"""
+Sphinx extension: write the reference pages from the code they describe.
+
+At ``builder-inited`` it writes ``reference/commands.md`` (every ``cvc-balance`` command and
+option, from the argparse parsers) and ``reference/node.md`` (every topic and parameter of
+the ``balance_monitor`` node, from its ``TOPICS`` and ``PARAMETERS`` declarations). Nothing
+in them is typed by hand, so the reference cannot drift from the code.
+"""
+
+import argparse
+from pathlib import Path
+
+
+def _escape(text):
+    """Return ``text`` safe inside a Markdown table cell."""
+    return str(text).replace('|', '\\|').replace('\n', ' ')
+
+
+def _option_rows(parser):
+    rows = []
+    for action in parser._actions:
+        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
+            continue
+        if action.option_strings:
+            name = ', '.join(f'`{o}`' for o in action.option_strings)
+            if action.nargs != 0:
+                metavar = action.metavar or action.dest.upper()
+                metavar = ' '.join(metavar) if isinstance(metavar, tuple) else metavar
+                name += f' `{metavar}`'
+        else:
+            name = f'`{action.metavar or action.dest}`'
+        default = '' if action.default in (None, argparse.SUPPRESS, False) or \
+            action.nargs == 0 and action.default is False else f'`{action.default!r}`'
+        choices = f" (one of {', '.join(map(str, action.choices))})" if action.choices else ''
+        meaning = action.help % vars(action) if action.help else ''
+        rows.append(f'| {name} | {_escape(meaning)}{_escape(choices)} | {default} |')
+    return rows
+
+
+def commands_page():
+    """Return the Markdown of every cvc-balance command, from the parsers."""
+    from cvc_balance.cli import parser
+    top = parser()
+    sub = next(a for a in top._actions if isinstance(a, argparse._SubParsersAction))
+    lines = ['# Command reference', '',
+             'Generated from the `cvc-balance` argument parsers at build time '
+             '(`cvc_balance/cli/`). Exit codes: 0 done, 1 nothing to report or a failure '
+             'that is not the input\'s, 2 bad input (one line on stderr naming what is '
+             'wrong).', '']
+    helps = {a.dest: a.help for a in sub._choices_actions}
+    for name, command in sub.choices.items():
+        lines += [f'## `cvc-balance {name}`', '', _escape(helps.get(name) or ''), '',
+                  command.description or '', '', '```text', command.format_usage().strip(),
+                  '```', '', '| argument | meaning | default |', '|---|---|---|']
+        lines += _option_rows(command)
+        lines.append('')
+    return '\n'.join(lines)
+
+
+def node_page():
+    """Return the Markdown of the node's topics and parameters, from its declarations."""
+    from cvc_balance.ros.balance_monitor import PARAMETERS, TOPICS
+    lines = ['# Node reference: `balance_monitor`', '',
+             'Generated from the node\'s `TOPICS` and `PARAMETERS` declarations at build time '
+             '(`cvc_balance/ros/balance_monitor.py`), the same ones `balance-monitor --help` '
+             'prints. Topic names are relative: `-r __ns:=/gantry1` puts them under '
+             '`/gantry1`; `<name>` is each support of the layout in force.', '']
+    for direction, heading in (('in', 'Subscriptions'), ('out', 'Publications')):
+        lines += [f'## {heading}', '', '| topic | type | what it carries |', '|---|---|---|']
+        lines += [f'| `{name}` | `{kind}` | {_escape(text)} |'
+                  for name, kind, way, text in TOPICS if way == direction]
+        lines.append('')
+    lines += ['## Parameters', '',
+              'Given as `-p NAME:=VALUE` after `--ros-args`, or in a parameters file '
+              '(`config/balance_monitor.yaml`, keyed `/**` so it applies under any name and '
+              'namespace).', '', '| parameter | default | range | meaning |',
+              '|---|---|---|---|']
+    for name, default, description, bounds in PARAMETERS:
+        limits = f'{bounds[0]:g} to {bounds[1]:g}' if bounds else ''
+        lines.append(f'| `{name}` | `{default!r}` | {limits} | {_escape(description)} |')
+    return '\n'.join(lines) + '\n'
+
+
+def write_pages(app):
+    """Write the generated pages into the source folder (ignored by git)."""
+    folder = Path(app.srcdir) / 'reference'
+    folder.mkdir(exist_ok=True)
+    for name, text in (('commands.md', commands_page()), ('node.md', node_page())):
+        path = folder / name
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+
+
+def setup(app):
+    """Register the page writer."""
+    app.connect('builder-inited', write_pages)
+    return {'version': '1', 'parallel_read_safe': True}
