@@ -21,24 +21,53 @@ import math
 
 import numpy as np
 
-from cvc_balance.bag.identify_run import identify_bag
+from cvc_balance.bag.identify_run import cell_readings
 from cvc_balance.bag.mcap_reader import BagError, float64_samples, wrench_samples
 from cvc_balance.bag.replay import layout_events, read_inputs
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.field import (calibrate, continuous_correction, continuous_plan,
                                optimal_plan, problem_from_readings, problem_from_unbalance,
-                               split_plan, steady_window, track)
+                               split_plan, steady_stretches, track)
 from cvc_balance.field.correction import with_unbalance_limits
 from cvc_balance.field.influence import CHI2_2DOF_95
-from cvc_balance.field.order_tracking import DEFAULT_TOLERANCE
+from cvc_balance.field.model_check import check_coefficients, ModelCheck, plane_positions
+from cvc_balance.field.order_tracking import busiest_speed, DEFAULT_TOLERANCE
+from cvc_balance.identify import CellReadings, fit, identified_unbalance, Motion
 from cvc_balance.messages import topics
 from cvc_balance.physics import iso21940
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.motion import accepted_samples, MAX_STAMP_JUMP
+from cvc_balance.physics.motion import accepted_motion, accepted_samples, MAX_STAMP_JUMP
 
 COMPONENTS = ('force_x', 'force_y', 'force_z', 'torque_x', 'torque_y', 'torque_z')
 SPEED_MISMATCH = 0.02
 """Runs whose steady speeds differ by more than 2 % are compared with a warning."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    """
+    One layout segment of a run: the motion under one layout, and its steady stretches.
+
+    ``number`` counts from 1 over the segments with motion, as ``identify`` numbers them;
+    ``layout`` in force (None without one); ``start``/``end`` the log times (s) of its
+    first and last motion samples; ``stretches`` its :class:`SteadyWindow` (stamps, s) at
+    the speed read, in order; ``note`` why there is none.
+    """
+
+    number: int
+    layout: object
+    start: float
+    end: float
+    stretches: tuple
+    note: str = ''
+    first_ns: int = 0
+
+    @property
+    def longest(self):
+        """Return the stretch with the most whole revolutions (the later of equals), or None."""
+        if not self.stretches:
+            return None
+        return max(reversed(self.stretches), key=lambda w: w.revolutions)
 
 
 @dataclass
@@ -49,7 +78,8 @@ class RunReadings:
     ``window`` the steady stretch (stamps, s) read and ``log_window`` the same in log
     times; ``layout`` in force there (None if the bag has none and none was given);
     ``first_ns`` the bag's first motion log time (its date); ``problems`` what the reader
-    had to skip.
+    had to skip; ``segment`` the number of the layout segment read, ``segments`` every
+    :class:`Segment` of the run (a run is never read across a layout change).
     """
 
     bag: str
@@ -60,6 +90,13 @@ class RunReadings:
     layout: object
     first_ns: int
     problems: list = field(default_factory=list)
+    segment: int = 1
+    segments: tuple = ()
+
+    @property
+    def chosen(self):
+        """Return the :class:`Segment` read."""
+        return self.segments[self.segment - 1]
 
 
 def channel_sources(bag):
@@ -85,38 +122,126 @@ def default_sensors(sources, layout):
             if index is None or name.split('/')[-1] in wanted]
 
 
+@dataclass
+class _Motion:
+    """A run's accepted motion: stamps and log times (s), angle (rad, unwrapped), omega."""
+
+    stamp: np.ndarray
+    log: np.ndarray
+    angle: np.ndarray
+    omega: np.ndarray
+
+
+def run_segments(bag, joint_name='gantry_joint', layout_file=None, speed=None,
+                 tolerance=DEFAULT_TOLERANCE, max_speed=1000.0, segment=None):
+    """
+    Return (motion, [Segment], problems) of an open bag: its layout segments.
+
+    The segments are the bag's own layout messages' (a ``layout_file`` replaces the
+    layout of each, never joins them); each segment's steady stretches are at ``speed``
+    rad/s, or at the speed the run spent most time at (the chosen ``segment``'s, when a
+    number is given). A bag without layouts is one segment with layout None.
+    """
+    motion, layout_messages = read_inputs(bag, joint_name)
+    stamp, log = motion.stamp * 1e-9, motion.log_time * 1e-9
+    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP,
+                                receive=log)
+    kept = _Motion(stamp[accepted], log[accepted], np.unwrap(motion.angle[accepted]),
+                   motion.omega[accepted])
+    if len(kept.stamp) < 2:
+        raise BagError(f'{bag.path}: fewer than two usable motion samples')
+    problems = list(bag.problems)
+    try:
+        events, layout_problems = layout_events(bag, layout_messages)
+        problems += layout_problems
+    except BagError:
+        events = [(np.iinfo(np.int64).min, None)]
+    if layout_file is not None:
+        from cvc_balance.physics.layout_file import load_layout
+        replaced = load_layout(layout_file)
+        events = [(at, replaced) for at, _ in events]
+    bounds = [at for at, _ in events[1:]] + [np.iinfo(np.int64).max]
+    log_ns = motion.log_time[accepted]
+    spans = []
+    for (start_ns, layout), end_ns in zip(events, bounds):
+        lo, hi = (int(k) for k in np.searchsorted(log_ns, [start_ns, end_ns]))
+        if hi - lo >= 2:
+            spans.append((layout, lo, hi))
+    if not spans:
+        raise BagError(f'{bag.path}: no layout segment holds two motion samples')
+    target = speed
+    if target is None:
+        lo, hi = (spans[segment - 1][1:] if segment is not None and 1 <= segment <= len(spans)
+                  else (0, len(kept.stamp)))
+        target = busiest_speed(kept.stamp[lo:hi], np.abs(kept.omega[lo:hi]), tolerance)
+    segments = []
+    for number, (layout, lo, hi) in enumerate(spans, 1):
+        part = slice(lo, hi)
+        try:
+            stretches, note = tuple(steady_stretches(kept.stamp[part], kept.angle[part],
+                                                     kept.omega[part], target or None,
+                                                     tolerance)), ''
+        except ValueError as error:
+            stretches, note = (), str(error)
+        segments.append(Segment(number, layout, float(kept.log[lo]), float(kept.log[hi - 1]),
+                                stretches, note, int(log_ns[lo])))
+    return kept, segments, problems
+
+
+def segment_text(segment):
+    """Return one line naming a segment: number, times, layout and its steady stretch."""
+    layout = segment.layout
+    where = f"layout '{layout.name}' ({layout.digest()})" if layout is not None \
+        else 'no layout'
+    text = f'segment {segment.number} ({segment.start:.3f}-{segment.end:.3f} s, {where})'
+    window = segment.longest
+    if window is None:
+        return f'{text}: {segment.note}'
+    return (f'{text}: steady {window.start:.3f}-{window.end:.3f} s at {window.speed:.4g} '
+            f'rad/s, {window.revolutions} revolutions')
+
+
+def choose_segment(path, segments, segment=None):
+    """
+    Return the :class:`Segment` to read: number ``segment``, or the longest steady one.
+
+    Raises BagError naming the segments when the one asked for does not exist or has no
+    steady stretch.
+    """
+    listing = '; '.join(segment_text(s) for s in segments)
+    if segment is not None:
+        if not 1 <= segment <= len(segments):
+            raise BagError(f'{path}: --segment {segment}: the run has {len(segments)} layout '
+                           f'segment{"s" if len(segments) > 1 else ""} ({listing})')
+        chosen = segments[segment - 1]
+        if chosen.longest is None:
+            raise BagError(f'{path}: segment {segment} has no steady stretch to read: '
+                           f'{chosen.note}')
+        return chosen
+    steady = [s for s in segments if s.longest is not None]
+    if not steady:
+        notes = '; '.join(dict.fromkeys(s.note for s in segments))
+        raise BagError(f'{path}: {notes}')
+    return max(reversed(steady), key=lambda s: s.longest.revolutions)
+
+
 def read_run(bag_path, sensors=None, speed=None, tolerance=DEFAULT_TOLERANCE,
-             joint_name='gantry_joint', layout_file=None, max_speed=1000.0):
+             joint_name='gantry_joint', layout_file=None, max_speed=1000.0, segment=None):
     """
     Return the :class:`RunReadings` of a bag (see the module's description).
 
     ``sensors``: channel names to read (default: :func:`default_sensors`); ``speed``
     rad/s: read the steady stretch at that speed (default: the speed the run spent most
-    time at). Raises ValueError (BagError) naming what is missing.
+    time at); ``segment``: the layout segment's number (default: the one with the longest
+    steady stretch). The stretch read lies inside one layout segment. Raises ValueError
+    (BagError) naming what is missing.
     """
     bag = open_bag(bag_path)
-    motion, layout_messages = read_inputs(bag, joint_name)
-    stamp, log = motion.stamp * 1e-9, motion.log_time * 1e-9
-    accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP,
-                                receive=log)
-    stamp, log = stamp[accepted], log[accepted]
-    angle, omega = np.unwrap(motion.angle[accepted]), motion.omega[accepted]
-    if len(stamp) < 2:
-        raise BagError(f'{bag.path}: fewer than two usable motion samples')
-    try:
-        window = steady_window(stamp, angle, omega, speed, tolerance)
-    except ValueError as error:
-        raise BagError(f'{bag.path}: {error}') from None
-    layout, problems = None, list(bag.problems)
-    try:
-        events, layout_problems = layout_events(bag, layout_messages, layout_file)
-        problems += layout_problems
-        start_log = np.interp(window.start, stamp, log) * 1e9
-        layout = [lay for at, lay in events if at <= start_log][-1:] or [events[0][1]]
-        layout = layout[0]
-    except BagError:
-        if layout_file is not None:
-            raise
+    motion, segments, problems = run_segments(bag, joint_name, layout_file, speed, tolerance,
+                                              max_speed, segment)
+    chosen = choose_segment(bag.path, segments, segment)
+    window, layout = chosen.longest, chosen.layout
+    stamp, log, angle = motion.stamp, motion.log, motion.angle
     sources = channel_sources(bag)
     names = default_sensors(sources, layout) if sensors is None else list(sensors)
     missing = [n for n in names if n not in sources]
@@ -147,24 +272,41 @@ def read_run(bag_path, sensors=None, speed=None, tolerance=DEFAULT_TOLERANCE,
             raise BagError(f'{bag.path}: channel {name}: {error}') from None
         units[name] = unit
     return RunReadings(str(bag_path), window, log_window, phasors, units, layout,
-                       int(motion.log_time.min()), problems)
+                       int(round(log[0] * 1e9)), problems, chosen.number, tuple(segments))
 
 
 def calibrate_runs(baseline_path, trial_paths, trials, keep_trial=False, sensors=None,
-                   speed=None, tolerance=DEFAULT_TOLERANCE, joint_name='gantry_joint'):
+                   speed=None, tolerance=DEFAULT_TOLERANCE, joint_name='gantry_joint',
+                   layout_file=None, segments=None):
     """
     Return (Calibration, [RunReadings], warnings) of a baseline run and trial runs.
 
     ``trials``: one :class:`~cvc_balance.field.influence.Trial` (kg, rad, m) per trial
-    run, in order. Every run is read at the baseline's steady speed (or ``speed``).
+    run, in order. Every run is read at the baseline's steady speed (or ``speed``), each
+    inside one layout segment: ``segments`` one number per run, or one for every run
+    (None: each run's longest steady one).
     """
     if len(trial_paths) != len(trials):
         raise ValueError(f'{len(trial_paths)} trial runs but {len(trials)} --trial weights: '
                          'give one --trial per trial run, in order')
-    baseline = read_run(baseline_path, sensors, speed, tolerance, joint_name)
+    count = 1 + len(trial_paths)
+    segments = [None] * count if not segments else list(segments)
+    if len(segments) == 1:
+        segments *= count
+    if len(segments) != count:
+        raise ValueError(f'--segment: give one number for every run or one per run ({count}), '
+                         f'got {len(segments)}')
+    baseline = read_run(baseline_path, sensors, speed, tolerance, joint_name, layout_file,
+                        segment=segments[0])
+    if baseline.layout is not None and baseline.layout.correction_planes() is not None:
+        try:
+            plane_positions(baseline.layout, dict.fromkeys(t.plane for t in trials))
+        except ValueError as error:
+            raise ValueError(f'--trial: {error}') from None
     names = list(baseline.phasors)
     at = baseline.window.speed if speed is None else speed
-    runs = [baseline] + [read_run(p, names, at, tolerance, joint_name) for p in trial_paths]
+    runs = [baseline] + [read_run(p, names, at, tolerance, joint_name, layout_file,
+                                  segment=n) for p, n in zip(trial_paths, segments[1:])]
     warnings = []
     for k, run in enumerate(runs[1:]):
         off = abs(run.window.speed / baseline.window.speed - 1.0)
@@ -172,12 +314,41 @@ def calibrate_runs(baseline_path, trial_paths, trials, keep_trial=False, sensors
             warnings.append(f'trial run {k + 1} ({run.bag}) is at {run.window.speed:.4g} '
                             f'rad/s, {off:.1%} off the baseline\'s {baseline.window.speed:.4g}: '
                             'readings grow with speed (forces as its square)')
+        if None not in (run.layout, baseline.layout) \
+                and run.layout.digest() != baseline.layout.digest():
+            warnings.append(f"trial run {k + 1} ({run.bag}) is read under layout "
+                            f"'{run.layout.name}' ({run.layout.digest()}), the baseline under "
+                            f"'{baseline.layout.name}' ({baseline.layout.digest()}): the "
+                            'coefficients take the baseline\'s')
     calibration = calibrate(
         [baseline.phasors[n].value for n in names], trials,
         [[run.phasors[n].value for n in names] for run in runs[1:]], names, keep_trial,
         [baseline.phasors[n].sigma for n in names],
         [[run.phasors[n].sigma for n in names] for run in runs[1:]])
     return calibration, runs, warnings
+
+
+def permissible_unbalance(layout, speed):
+    """Return the rotor's permissible unbalance (kg m) by its layout's grade, at ``speed``."""
+    model = RotorModel.from_layout(layout)
+    return iso21940.permissible_unbalance(layout.balancing.grade, model.mass,
+                                          layout.balancing.service_speed or speed)
+
+
+def check_calibration(calibration, runs, trials, keep_trial=False):
+    """
+    Return the :class:`~cvc_balance.field.model_check.ModelCheck` of a run calibration.
+
+    The baseline's layout (its segment's, or the layout file) predicts the load cells'
+    coefficients at the baseline's speed; without a layout nothing is checked.
+    """
+    baseline = runs[0]
+    layout = baseline.layout
+    if layout is None:
+        return ModelCheck(False, 'no layout in the baseline run (give --layout-file): the '
+                          'coefficients are not checked against physics')
+    return check_coefficients(layout, calibration, baseline.window.speed, trials, keep_trial,
+                              permissible_unbalance(layout, baseline.window.speed))
 
 
 @dataclass
@@ -241,28 +412,61 @@ class FieldCorrection:
     max_weights: int = None
 
 
-def grade_view(run, layout_file=None, joint_name='gantry_joint'):
+def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=1000.0,
+                     time_constant=0.1):
+    """
+    Return the RotorUnbalance the load cells identify over one :class:`Segment`, or None.
+
+    The segment's own layout and samples only (never across a layout change), the motion
+    and alpha as ``identify`` takes them; None without cells or when not identifiable.
+    """
+    if segment.layout is None:
+        return None
+    bag = open_bag(bag_path)
+    motion, _ = read_inputs(bag, joint_name)
+    t = motion.stamp * 1e-9
+    accepted, alpha = accepted_motion(t, motion.angle, motion.omega, max_speed, time_constant)
+    log = motion.log_time[accepted] * 1e-9
+    inside = (log >= segment.start) & (log <= segment.end)
+    if np.count_nonzero(inside) < 2:
+        return None
+    seg = Motion(t[accepted][inside], motion.angle[accepted][inside],
+                 motion.omega[accepted][inside], alpha[inside])
+    model = RotorModel.from_layout(segment.layout)
+    cells = {}
+    for name, cell in cell_readings(bag, model.supports).items():
+        keep = (cell.time >= seg.time[0]) & (cell.time <= seg.time[-1])
+        cells[name] = CellReadings(cell.support, cell.time[keep], cell.force[keep],
+                                   cell.torque[keep])
+    if not cells:
+        return None
+    estimate, _ = fit(model, seg, cells)
+    if not (estimate.readings and estimate.identifiable):
+        return None
+    return identified_unbalance(model, estimate)
+
+
+def grade_view(run, layout_file=None, joint_name='gantry_joint', segment=None):
     """
     Return the :class:`GradeView` of a run (RunReadings) from its load cells, or None.
 
     None when the bag has no load cells or no layout with two correction planes. The
-    segment identified is the layout's in force over the run's steady window; the grade
-    is judged at the layout's service speed (default: the run's steady speed).
+    cells are fitted over the run's layout segment (``segment``: another
+    :class:`Segment` of it); the grade is judged at the layout's service speed (default:
+    the run's steady speed). ``layout_file`` is in the run's segments already.
     """
-    if run.layout is None or run.layout.correction_planes() is None:
-        return None
-    segments, _ = identify_bag(run.bag, layout_file, joint_name)
-    middle = 0.5e9 * (run.log_window.start + run.log_window.end)
-    usable = [s for s in segments if s.readings and s.estimate.identifiable]
-    usable = [s for s in usable if s.start_ns <= middle <= s.end_ns] or usable
-    if not usable:
-        return None
-    segment = usable[-1]
+    segment = run.chosen if segment is None else segment
     layout = segment.layout
+    if layout is None or layout.correction_planes() is None:
+        return None
+    identified = identify_segment(run.bag, segment, joint_name)
+    if identified is None or not identified.planes:
+        return None
     model = RotorModel.from_layout(layout)
     z = layout.correction_planes()
-    planes = segment.identified.planes
-    speed = layout.balancing.service_speed or run.window.speed
+    planes = identified.planes
+    steady = segment.longest
+    speed = layout.balancing.service_speed or (steady.speed if steady else run.window.speed)
     shares = iso21940.plane_shares(model.s_z / model.mass, *z)
     u_per = iso21940.permissible_unbalance(layout.balancing.grade, model.mass, speed)
     return GradeView(('I', 'II'), tuple(z), np.array([v.value for _, v in planes]),
@@ -272,7 +476,7 @@ def grade_view(run, layout_file=None, joint_name='gantry_joint'):
 
 def correct_run(run_path, calibration=None, record=None, layout_file=None,
                 objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
-                joint_name='gantry_joint', time_limit=30.0):
+                joint_name='gantry_joint', time_limit=30.0, segment=None):
     """
     Return the :class:`FieldCorrection` of a run (see the module's description).
 
@@ -282,12 +486,14 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     keep the readings' (or the identification's) 95 % radius to spare. ``objective``
     'fewest' (default when there are limits) or 'residual' (at most ``max_weights``
     weights, default two per plane with sites). Sites and the grade come from
-    ``layout_file`` or the bag's layout.
+    ``layout_file`` or the bag's layout; ``segment`` the layout segment to read (default:
+    the one with the longest steady stretch).
     """
     warnings = []
     speed = None if record is None else record.get('speed')
     sensors = None if calibration is None else list(calibration.sensors)
-    run = read_run(run_path, sensors, speed, tolerance, joint_name, layout_file)
+    run = read_run(run_path, sensors, speed, tolerance, joint_name, layout_file,
+                   segment=segment)
     layout = run.layout
     sites = {s.plane: s for s in layout.balancing.sites} if layout is not None else {}
     grade = grade_view(run, layout_file, joint_name)

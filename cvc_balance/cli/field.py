@@ -20,6 +20,8 @@ from cvc_balance.physics.frames import degrees
 
 MAX_RECORD_BYTES = 16 * 2**20
 """Largest coefficient record read, bytes."""
+MAX_SEGMENT = 10**6
+"""Largest layout segment number taken."""
 
 
 def register(commands):
@@ -36,6 +38,14 @@ def register(commands):
                            help='the trial weight of each trial run, in order (I:0.2@0,0.68)')
     calibrate.add_argument('--keep-trial', action='store_true',
                            help='each trial weight stayed on for the runs after it')
+    calibrate.add_argument('--layout-file', metavar='FILE',
+                           help="layout to check the coefficients against (default: the "
+                           "baseline's)")
+    calibrate.add_argument('--segment', type=segment_number, nargs='+', metavar='N',
+                           help='layout segment to read: one number for every run, or one '
+                           'per run (default: each run\'s segment with the longest steady '
+                           'stretch; a run is never read across a layout change)')
+    _accept_mismatch(calibrate)
     _run_options(calibrate)
     calibrate.add_argument('--speed', type=positive, metavar='W',
                            help='read the runs at this steady speed, rad/s (default: the '
@@ -103,6 +113,22 @@ def register(commands):
         command.set_defaults(run=run_correct if name == 'correct' else run_report)
 
 
+def segment_number(text):
+    """Parse a layout segment's number, 1 to 10^6 (argparse type)."""
+    import argparse
+
+    value = count(text)
+    if value > MAX_SEGMENT:
+        raise argparse.ArgumentTypeError(f'must be <= {MAX_SEGMENT}, got {text!r}')
+    return value
+
+
+def _accept_mismatch(command):
+    command.add_argument('--accept-mismatch', action='store_true',
+                         help="go on when the measured coefficients disagree with the "
+                         "layout's physics (beyond a factor 3 or 45 deg), with a warning")
+
+
 def _run_options(command):
     command.add_argument('--speed-tolerance', type=positive, default=1.0, metavar='PERCENT',
                          help='speeds within this of the steady speed count as steady '
@@ -122,7 +148,7 @@ def run_calibrate(args):
     """Run ``cvc-balance calibrate``."""
     import yaml
 
-    from cvc_balance.bag.field_run import calibrate_runs
+    from cvc_balance.bag.field_run import calibrate_runs, check_calibration
     from cvc_balance.field.coefficients import calibration_mapping
     from cvc_balance.field.notation import bag_trial
 
@@ -133,16 +159,19 @@ def run_calibrate(args):
         check_output(args.output, args.runs)
     calibration, runs, speed_warnings = calibrate_runs(
         args.runs[0], args.runs[1:], trials, args.keep_trial, args.sensor, args.speed,
-        args.speed_tolerance / 100.0, args.joint_name)
+        args.speed_tolerance / 100.0, args.joint_name, args.layout_file, args.segment)
+    check = check_calibration(calibration, runs, trials, args.keep_trial)
+    if check.mismatch and not args.accept_mismatch:
+        raise ValueError(check.message)
     baseline = runs[0]
-    layout = None if baseline.layout is None else \
-        {'name': baseline.layout.name, 'digest': baseline.layout.digest()}
     record = calibration_mapping(
         calibration, [baseline.units[n] for n in calibration.sensors], 'kg m',
         baseline.window.speed, args.keep_trial, trials,
         [run_identity(run, 'baseline' if k == 0 else f'trial {k}')
-         for k, run in enumerate(runs)], layout)
-    record['warnings'] = speed_warnings + record['warnings']
+         for k, run in enumerate(runs)], _layout(baseline.layout),
+        check_mapping(check))
+    record['warnings'] = speed_warnings + ([check.message] if check.mismatch else []) \
+        + record['warnings']
     warn(record['warnings'])
     if args.output:
         with replaced_when_done(args.output) as path:
@@ -157,14 +186,54 @@ def run_calibrate(args):
     return 0
 
 
+def check_mapping(check):
+    """Return a ModelCheck as plain data: the record's and the JSON's ``model_check``."""
+    if not check.checked:
+        return {'checked': False, 'note': check.note}
+    predicted = [[None if math.isnan(v.real) else _polar(complex(v)) for v in row]
+                 for row in check.predicted]
+    return {'checked': True, 'agrees': not check.mismatch,
+            'sensors': list(check.sensors), 'predicted': predicted,
+            'planes': [{'plane': p.plane, 'factor': abs(p.factor),
+                        'phase_deg': degrees(math.atan2(p.factor.imag, p.factor.real)),
+                        'ci95': p.ci95 if math.isfinite(p.ci95) else None,
+                        'pattern': p.pattern if math.isfinite(p.pattern) else None,
+                        'agrees': p.agrees} for p in check.planes],
+            'cause': check.cause or None, 'message': check.message or None}
+
+
 def run_identity(run, role):
     """Return a run's identity and steady window as plain data."""
     return {'role': role, 'bag': run.bag, 'date': bag_date(run.first_ns),
+            'segment': segment_mapping(run.chosen), 'segments': len(run.segments),
             'speed': run.window.speed, 'revolutions': run.window.revolutions,
             'window': [run.window.start, run.window.end], 'speed_spread': run.window.spread,
             'readings': [{'channel': n, 'unit': run.units[n], **_polar(p.value),
                           'sigma': p.sigma, 'samples': p.samples}
                          for n, p in run.phasors.items()]}
+
+
+def segment_mapping(segment):
+    """Return a layout segment as plain data: number, times (log, s), layout, stretch."""
+    window = segment.longest
+    return {'number': segment.number, 'from': segment.start, 'to': segment.end,
+            'layout': _layout(segment.layout),
+            'steady': None if window is None else {
+                'window': [window.start, window.end], 'speed': window.speed,
+                'revolutions': window.revolutions, 'speed_spread': window.spread},
+            'stretches': len(segment.stretches), 'note': segment.note or None}
+
+
+def segment_line(mapping):
+    """Return a segment mapping as people read it (one line)."""
+    layout = mapping['layout']
+    where = f"layout '{layout['name']}' ({layout['digest']})" if layout else 'no layout'
+    text = f"segment {mapping['number']} ({mapping['from']:.3f}-{mapping['to']:.3f} s, {where})"
+    steady = mapping['steady']
+    if steady is None:
+        return f"{text}: no steady stretch ({mapping['note']})"
+    return (f"{text}: steady {steady['window'][0]:.3f}-{steady['window'][1]:.3f} s at "
+            f"{steady['speed']:.4g} rad/s, {steady['revolutions']} revolutions")
 
 
 def bag_date(log_ns):
@@ -184,6 +253,10 @@ def format_record(record):
     for run in record['runs']:
         lines.append(f"{run['role']}: {run['bag']} at {run['speed']:.4g} rad/s, "
                      f"{run['revolutions']} revolutions")
+        if run.get('segment'):
+            lines.append(f"  read in {segment_line(run['segment'])}"
+                         + (f" (of {run['segments']}; --segment to choose)"
+                            if run.get('segments', 1) > 1 else ''))
     planes = record['planes']
     lines.append(f"influence coefficients ({record['reading_units'][0]} per "
                  f"{record['correction_unit']}), condition number "
@@ -203,7 +276,21 @@ def format_record(record):
             f"{trial['relative_change']:.0%} of the readings"
         lines.append(f"  trial run {trial['run']} (plane {trial['plane']}): largest change "
                      f"{trial['largest_change']:.4g} = {seen}")
+    lines.append(check_line(record.get('model_check')))
     return '\n'.join(lines)
+
+
+def check_line(check):
+    """Return the model check as one line for people."""
+    if not check:
+        return "not checked against the layout's physics"
+    if not check['checked']:
+        return f"not checked against the layout's physics: {check['note']}"
+    said = ', '.join(f"plane {p['plane']} {p['factor']:.3g} times "
+                     f"{int(round(p['phase_deg'])):+d} deg" for p in check['planes'])
+    if check['agrees']:
+        return f"the layout's physics predicts these coefficients: measured/predicted {said}"
+    return f"MISMATCH with the layout's physics (accepted): measured/predicted {said}"
 
 
 def _number(value):

@@ -21,7 +21,7 @@ KIND = 'cvc_balance influence coefficients'
 VERSION = 1
 FIELDS = ('kind', 'version', 'planes', 'sensors', 'reading_units', 'correction_unit', 'speed',
           'condition_number', 'coefficients', 'ci95', 'keep_trial', 'trials', 'runs',
-          'layout', 'warnings')
+          'layout', 'model_check', 'warnings')
 
 
 class CoefficientsError(ValueError):
@@ -35,14 +35,15 @@ def polar(value):
 
 
 def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
-                        keep_trial=False, trials=(), runs=(), layout=None):
+                        keep_trial=False, trials=(), runs=(), layout=None, model_check=None):
     """
     Return the record of ``calibration`` as plain data (YAML/JSON-able).
 
     ``reading_units`` one per sensor; ``correction_unit`` the unbalance unit ('kg m', or
     the trial's mass unit); ``speed`` rad/s or None; ``trials`` the
     :class:`~cvc_balance.field.influence.Trial` per run; ``runs`` per run identity
-    mappings; ``layout`` {name, digest} or None.
+    mappings; ``layout`` {name, digest} or None; ``model_check`` the coefficients
+    against the layout's physics (plain data) or None.
     """
     ci95 = None if calibration.ci95 is None else np.asarray(calibration.ci95).tolist()
     checks = []
@@ -62,7 +63,8 @@ def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
         'condition_number': condition if math.isfinite(condition) else None,
         'coefficients': [[polar(v) for v in row] for row in np.asarray(calibration.matrix)],
         'ci95': ci95, 'keep_trial': bool(keep_trial), 'trials': checks, 'runs': list(runs),
-        'layout': layout, 'warnings': list(calibration.warnings),
+        'layout': layout, 'model_check': model_check,
+        'warnings': list(calibration.warnings),
     }
 
 

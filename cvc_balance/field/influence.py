@@ -109,14 +109,11 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
     sensors = tuple(sensors) if sensors is not None else \
         tuple(f'sensor {k + 1}' for k in range(count))
     planes = tuple(dict.fromkeys(t.plane for t in trials))
-    weights_on = np.zeros((len(trials), len(planes)), complex)
     for k, trial in enumerate(trials):
         if not (trial.mass > 0.0 and trial.radius > 0.0):
             raise ValueError(f'trial run {k + 1} (plane {trial.plane}): the trial mass and '
                              'radius must be > 0')
-        if keep_trial and k > 0:
-            weights_on[k] = weights_on[k - 1]
-        weights_on[k, planes.index(trial.plane)] += trial.unbalance
+    weights_on = trial_weights_on(trials, planes, keep_trial)
     if np.linalg.matrix_rank(weights_on) < len(planes):
         raise ValueError('the trial runs cannot tell the planes apart (give each plane its '
                          'own trial run)')
@@ -147,6 +144,22 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
                         'and reading errors are amplified up to that many times in the '
                         'corrections')
     return Calibration(planes, sensors, matrix, ci95, condition, checks, tuple(warnings))
+
+
+def trial_weights_on(trials, planes, keep_trial=False):
+    """
+    Return the unbalance on per run and plane, (runs, planes) complex (kg m, or by hand).
+
+    Run k has its own trial on, or with ``keep_trial`` every trial up to it; a trial in
+    a plane not among ``planes`` adds nothing.
+    """
+    weights_on = np.zeros((len(trials), len(planes)), complex)
+    for k, trial in enumerate(trials):
+        if keep_trial and k > 0:
+            weights_on[k] = weights_on[k - 1]
+        if trial.plane in planes:
+            weights_on[k, planes.index(trial.plane)] += trial.unbalance
+    return weights_on
 
 
 def _check(k, trial, baseline, readings, keep_trial, sigma_a, sigma_b):
