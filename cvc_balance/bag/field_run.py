@@ -29,6 +29,7 @@ from cvc_balance.field import (calibrate, continuous_correction, continuous_plan
                                optimal_plan, problem_from_readings, problem_from_unbalance,
                                split_plan, steady_stretches, track)
 from cvc_balance.field.correction import with_unbalance_limits
+from cvc_balance.field.coefficients import record_trials
 from cvc_balance.field.influence import CHI2_2DOF_95
 from cvc_balance.field.model_check import check_coefficients, ModelCheck, plane_positions
 from cvc_balance.field.order_tracking import busiest_speed, DEFAULT_TOLERANCE
@@ -397,7 +398,9 @@ class FieldCorrection:
     ``method`` 'influence coefficients' or 'identified unbalance'; ``sites`` {plane:
     WeightSites}; ``radius`` {plane: m} at which continuous corrections are given as
     masses; ``grade`` a :class:`GradeView` or None (no load cells or layout);
-    ``warnings`` one line each; ``objective`` and ``max_weights`` of the optimal plan.
+    ``warnings`` one line each; ``objective`` and ``max_weights`` of the optimal plan;
+    ``model_check`` the coefficients against the layout's physics (None without
+    coefficients); ``segment_grades`` a GradeView or None per segment of the run.
     """
 
     run: RunReadings
@@ -410,6 +413,8 @@ class FieldCorrection:
     warnings: list
     objective: str = 'residual'
     max_weights: int = None
+    model_check: object = None
+    segment_grades: tuple = ()
 
 
 def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=1000.0,
@@ -446,14 +451,14 @@ def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=100
     return identified_unbalance(model, estimate)
 
 
-def grade_view(run, layout_file=None, joint_name='gantry_joint', segment=None):
+def grade_view(run, joint_name='gantry_joint', segment=None):
     """
     Return the :class:`GradeView` of a run (RunReadings) from its load cells, or None.
 
     None when the bag has no load cells or no layout with two correction planes. The
     cells are fitted over the run's layout segment (``segment``: another
-    :class:`Segment` of it); the grade is judged at the layout's service speed (default:
-    the run's steady speed). ``layout_file`` is in the run's segments already.
+    :class:`Segment` of it, whose layout a layout file has replaced); the grade is
+    judged at the layout's service speed (default: the run's steady speed).
     """
     segment = run.chosen if segment is None else segment
     layout = segment.layout
@@ -476,7 +481,8 @@ def grade_view(run, layout_file=None, joint_name='gantry_joint', segment=None):
 
 def correct_run(run_path, calibration=None, record=None, layout_file=None,
                 objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
-                joint_name='gantry_joint', time_limit=30.0, segment=None):
+                joint_name='gantry_joint', time_limit=30.0, segment=None,
+                accept_mismatch=False):
     """
     Return the :class:`FieldCorrection` of a run (see the module's description).
 
@@ -487,7 +493,8 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     'fewest' (default when there are limits) or 'residual' (at most ``max_weights``
     weights, default two per plane with sites). Sites and the grade come from
     ``layout_file`` or the bag's layout; ``segment`` the layout segment to read (default:
-    the one with the longest steady stretch).
+    the one with the longest steady stretch). Coefficients that disagree with the layout's
+    physics raise ValueError naming the likely mistake, unless ``accept_mismatch``.
     """
     warnings = []
     speed = None if record is None else record.get('speed')
@@ -495,8 +502,22 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     run = read_run(run_path, sensors, speed, tolerance, joint_name, layout_file,
                    segment=segment)
     layout = run.layout
+    check = None
+    if calibration is not None:
+        check = ModelCheck(False, 'no layout in the run (give --layout): the coefficients are '
+                           'not checked against physics')
+        if layout is not None:
+            check = check_coefficients(
+                layout, calibration, speed or run.window.speed, record_trials(record),
+                bool((record or {}).get('keep_trial')),
+                permissible_unbalance(layout, speed or run.window.speed))
+        if check.mismatch:
+            if not accept_mismatch:
+                raise ValueError(check.refusal)
+            warnings.append(check.message)
     sites = {s.plane: s for s in layout.balancing.sites} if layout is not None else {}
-    grade = grade_view(run, layout_file, joint_name)
+    grades = tuple(grade_view(run, joint_name=joint_name, segment=s) for s in run.segments)
+    grade = grades[run.segment - 1]
     if calibration is not None:
         names = list(calibration.sensors)
         sigma = np.array([run.phasors[n].sigma for n in names])
@@ -559,4 +580,4 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
         plans.append(optimal_plan(problem, used_sites, objective, max_weights,
                                   time_limit=time_limit))
     return FieldCorrection(run, method, problem, plans, used_sites, radius, grade, warnings,
-                           objective, max_weights)
+                           objective, max_weights, check, grades)

@@ -103,6 +103,10 @@ def register(commands):
                              'residual: two per plane with sites)')
         command.add_argument('--time-limit', type=positive, default=30.0, metavar='S',
                              help='seconds the mixed-integer search may take (default 30)')
+        command.add_argument('--segment', type=segment_number, metavar='N',
+                             help='layout segment to read (default: the one with the longest '
+                             'steady stretch; a run is never read across a layout change)')
+        _accept_mismatch(command)
         _run_options(command)
         if name == 'report':
             command.add_argument('--after', metavar='BAG', help='a check run after the '
@@ -162,7 +166,7 @@ def run_calibrate(args):
         args.speed_tolerance / 100.0, args.joint_name, args.layout_file, args.segment)
     check = check_calibration(calibration, runs, trials, args.keep_trial)
     if check.mismatch and not args.accept_mismatch:
-        raise ValueError(check.message)
+        raise ValueError(check.refusal)
     baseline = runs[0]
     record = calibration_mapping(
         calibration, [baseline.units[n] for n in calibration.sensors], 'kg m',
@@ -402,7 +406,7 @@ def correction_summary(args):
         calibration, record = read_coefficients(args.coefficients)
     result = correct_run(args.bag, calibration, record, args.layout, args.objective,
                          args.limit, args.max_weights, args.speed_tolerance / 100.0,
-                         args.joint_name, args.time_limit)
+                         args.joint_name, args.time_limit, args.segment, args.accept_mismatch)
     return summarise(result, record), result
 
 
@@ -448,7 +452,7 @@ def measured_after(path, args, result):
                          'in the run (to compare the identified unbalance)')
     run = read_run(path, None, None, args.speed_tolerance / 100.0, args.joint_name,
                    args.layout)
-    view = grade_view(run, args.layout, args.joint_name)
+    view = grade_view(run, args.joint_name)
     if view is None:
         raise ValueError(f'{path}: no load cells to identify the unbalance after the '
                          'correction from')
@@ -459,6 +463,14 @@ def measured_after(path, args, result):
                   'equivalent_grade': value, 'within_grade': value <= grade.grade,
                   'planes': [_plane_vector(p, z, u, ci) for p, z, u, ci in
                              zip(view.planes, view.z, view.before, view.ci95)]})
+
+
+def _segment_grade(view):
+    """Return a segment's identified grade (null without cells) as plain data."""
+    if view is None:
+        return None
+    value = view.equivalent_grade(view.before)
+    return {'grade': view.grade, 'equivalent_grade': value, 'within_grade': value <= view.grade}
 
 
 def _layout(layout):
@@ -477,6 +489,8 @@ def _plane_vector(plane, z, value, ci95=None, permissible=None):
 
 def summarise(result, record=None):
     """Return a FieldCorrection as JSON-able data (schema in the README)."""
+    import numpy as np
+
     run, problem, grade = result.run, result.problem, result.grade
     planes = []
     for plane in problem.planes:
@@ -489,7 +503,11 @@ def summarise(result, record=None):
         'run': {'bag': run.bag, 'date': bag_date(run.first_ns), 'layout': _layout(run.layout),
                 'speed': run.window.speed, 'revolutions': run.window.revolutions,
                 'window': [run.window.start, run.window.end],
-                'speed_spread': run.window.spread},
+                'speed_spread': run.window.spread, 'segment': run.segment},
+        'segments': [dict(segment_mapping(s), grade=_segment_grade(g))
+                     for s, g in zip(run.segments, result.segment_grades)],
+        'model_check': None if result.model_check is None
+        else check_mapping(result.model_check),
         'method': result.method, 'unit': problem.unit, 'objective': result.objective,
         'max_weights': result.max_weights, 'planes': planes,
         'readings': [{'channel': n, 'unit': run.units[n], **_polar(p.value), 'sigma': p.sigma}
@@ -512,14 +530,28 @@ def summarise(result, record=None):
                        'planes': [_plane_vector(p, z, u, ci, per) for p, z, u, ci, per in
                                   zip(grade.planes, grade.z, grade.before, grade.ci95,
                                       grade.permissible)]}}
+    unchanged = problem.measure(np.zeros(len(problem.planes), complex))
+    summary['before'] = {'residual': _residual(problem, unchanged)}
     for plan in result.plans:
-        summary['plans'].append(_plan(plan, problem, result, grade))
-    feasible = [p for p in summary['plans'] if p['name'] != 'continuous'
+        summary['plans'].append(_plan(plan, problem, result, grade, unchanged))
+    usable = [p for p in summary['plans'] if not p['worse']]
+    feasible = [p for p in usable if p['name'] == 'optimal'
                 and p['status'] in ('optimal', 'time limit')]
-    summary['recommended'] = 'optimal' if feasible else \
-        ('split' if len(summary['plans']) > 1 else 'continuous')
-    best = next(p for p in summary['plans'] if p['name'] == summary['recommended'])
-    if best['after'] is not None and not best['after']['within_grade']:
+    split = [p for p in usable if p['name'] == 'split']
+    free = [p for p in usable if p['name'] == 'continuous' and len(summary['plans']) == 1]
+    best = (feasible or split or free or [None])[0]
+    summary['recommended'] = None if best is None else best['name']
+    if best is None:
+        worst = summary['plans'][0]
+        after = worst['after']
+        said = (f"G {after['equivalent_grade']:.3g} predicted after, against G "
+                f"{summary['grade']['before']['equivalent_grade']:.3g} now by the load cells"
+                if after is not None else
+                f"residual rms {worst['residual']['rms']:.3g} against {unchanged.rms:.3g} now")
+        summary['warnings'].append(
+            'no plan is recommended: each would leave the rotor worse than it is (the '
+            f'continuous correction: {said}); check the coefficients and the trial runs')
+    elif best['after'] is not None and not best['after']['within_grade']:
         summary['warnings'].append(f"the {best['name']} plan does not bring the rotor within "
                                    f"G {grade.grade:g} (G {best['after']['equivalent_grade']:.3g}"
                                    ' predicted)')
@@ -549,7 +581,13 @@ def plain(data):
     return data
 
 
-def _plan(plan, problem, result, grade):
+def _residual(problem, residual):
+    return {'channels': [{'name': n, **_polar(v)}
+                         for n, v in zip(problem.channels, residual.values)],
+            'rms': residual.rms, 'total': residual.total, 'worst_of_limit': residual.worst}
+
+
+def _plan(plan, problem, result, grade, unchanged):
     corrections = []
     for plane, u in zip(problem.planes, plan.corrections):
         radius = result.radius.get(plane)
@@ -557,14 +595,16 @@ def _plan(plan, problem, result, grade):
             'plane': plane, 'unbalance': abs(u),
             'mass': abs(u) / radius if radius else None, 'radius': radius,
             'angle_deg': degrees(math.atan2(u.imag, u.real)) % 360.0})
-    residual = plan.residual
     after = None
+    worse = plan.residual.rms > unchanged.rms * (1.0 + 1e-9)
     if grade is not None and problem.unit == 'kg m':
         values = grade.after(plan, problem.planes)
         value = grade.equivalent_grade(values)
         after = {'equivalent_grade': value, 'within_grade': value <= grade.grade,
                  'planes': [_plane_vector(p, z, u) for p, z, u in
                             zip(grade.planes, grade.z, values)]}
+        # The load cells' own unbalance plus the weights: a judge the coefficients are not.
+        worse = worse or value > grade.equivalent_grade(grade.before) * (1.0 + 1e-9)
     return {
         'name': plan.name, 'status': plan.status,
         'gap': plan.gap if math.isfinite(plan.gap) else None, 'note': plan.note,
@@ -573,11 +613,8 @@ def _plan(plan, problem, result, grade):
                      'radius': w.radius, 'masses': list(w.masses), 'mass': w.mass}
                     for w in plan.weights],
         'count': plan.count,
-        'residual': {'channels': [{'name': n, **_polar(v)}
-                                  for n, v in zip(problem.channels, residual.values)],
-                     'rms': residual.rms, 'total': residual.total,
-                     'worst_of_limit': residual.worst},
-        'after': after,
+        'residual': _residual(problem, plan.residual),
+        'after': after, 'worse': worse,
     }
 
 
@@ -587,8 +624,20 @@ def format_summary(summary):
     layout = run['layout']
     lines = [f"run {run['bag']} ({run['date']}), layout "
              + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
-             + f": {run['revolutions']} revolutions at {run['speed']:.4g} rad/s",
-             f"corrections from the {summary['method']}"]
+             + f": {run['revolutions']} revolutions at {run['speed']:.4g} rad/s"]
+    segments = summary.get('segments') or []
+    for segment in segments:
+        used = segment['number'] == run['segment']
+        grade = segment['grade']
+        lines.append(('* ' if used else '  ') + segment_line(segment) + (
+            f"; cells: G {grade['equivalent_grade']:.3g}" if grade else '')
+            + (' (read)' if used and len(segments) > 1 else ''))
+    if len(segments) > 1:
+        lines.append(f"  (read segment {run['segment']} of {len(segments)}: --segment N to "
+                     'choose; never across a layout change)')
+    lines.append(f"corrections from the {summary['method']}")
+    if summary.get('model_check') is not None:
+        lines.append(check_line(summary['model_check']))
     grade = summary['grade']
     if grade is not None:
         before = grade['before']
@@ -616,6 +665,8 @@ def format_summary(summary):
             residual += f"; after: G {after['equivalent_grade']:.3g} (" + ', '.join(
                 f"{p['g_mm']:.0f} g mm" for p in after['planes']) + ')'
         lines.append('  ' + residual)
+    if summary['recommended'] is None:
+        lines.append('no plan recommended: each would leave the rotor worse than it is')
     measured = summary.get('measured_after')
     if measured is not None:
         lines.append(f"measured after ({measured['bag']}): G {measured['equivalent_grade']:.3g}")

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from cvc_balance.field.influence import Calibration
+from cvc_balance.field.influence import Calibration, checked_condition, Trial
 from cvc_balance.physics.layout import MAX_MAGNITUDE, short
 
 KIND = 'cvc_balance influence coefficients'
@@ -26,6 +26,14 @@ FIELDS = ('kind', 'version', 'planes', 'sensors', 'reading_units', 'correction_u
 
 class CoefficientsError(ValueError):
     """A coefficient record that cannot be used; ``str()`` is one line naming what."""
+
+
+def condition_number(matrix, what='the coefficients'):
+    """Return the condition number of coefficients; CoefficientsError when singular."""
+    try:
+        return checked_condition(matrix, what)
+    except ValueError as error:
+        raise CoefficientsError(str(error)) from None
 
 
 def polar(value):
@@ -127,15 +135,30 @@ def calibration_from_mapping(data, source='coefficients'):
             raise CoefficientsError(f'{source}: field {key} must be a list')
     if not isinstance(data.get('keep_trial', False), bool):
         raise CoefficientsError(f'{source}: field keep_trial must be true or false')
-    singular = np.linalg.svd(matrix, compute_uv=False)
-    if not singular[-1] > 0.0:
-        raise CoefficientsError(f'{source}: the coefficients are singular (a plane acts on '
-                                'no sensor, or two planes alike): no correction follows')
-    calibration = Calibration(tuple(planes), tuple(sensors), matrix, ci95,
-                              float(singular[0] / singular[-1]), (), tuple(warnings))
+    condition = condition_number(matrix, f'{source}: the coefficients')
+    calibration = Calibration(tuple(planes), tuple(sensors), matrix, ci95, condition, (),
+                              tuple(warnings))
     record = dict(data, reading_units=units, speed=speed,
                   correction_unit=data.get('correction_unit', 'kg m'))
     return calibration, record
+
+
+def record_trials(record):
+    """
+    Return the typed trials of a record's ``trials`` as :class:`Trial` (kg, rad, m).
+
+    () when the record has none or any is incomplete (then no mistake can be named).
+    """
+    trials = []
+    for entry in (record or {}).get('trials') or ():
+        try:
+            values = [float(entry[k]) for k in ('mass', 'angle_deg', 'radius')]
+        except (KeyError, TypeError, ValueError):
+            return ()
+        if not (isinstance(entry.get('plane'), str) and all(map(math.isfinite, values))):
+            return ()
+        trials.append(Trial(entry['plane'], values[0], math.radians(values[1]), values[2]))
+    return tuple(trials)
 
 
 def _names(value, where):

@@ -131,7 +131,8 @@ class ModelCheck:
     ``checked`` False when nothing could be compared (``note`` says why); ``sensors``
     those compared; ``predicted`` (all sensors, planes) complex, NaN where not known;
     ``planes`` a :class:`PlaneAgreement` each; ``mismatch``; ``cause`` the likely mistake
-    named ('' when none explains it); ``message`` one line for people.
+    named ('' when none explains it); ``message`` one line for people; ``refusal`` the
+    same, saying how to go on anyway.
     """
 
     checked: bool
@@ -142,6 +143,11 @@ class ModelCheck:
     mismatch: bool = False
     cause: str = ''
     message: str = ''
+
+    @property
+    def refusal(self):
+        """Return the line that refuses the coefficients."""
+        return f'{self.message} (--accept-mismatch to go on)'
 
 
 @dataclass(frozen=True)
@@ -192,8 +198,7 @@ def check_coefficients(layout, calibration, speed, trials=(), keep_trial=False,
     message = (f'the measured influence coefficients disagree with the layout\'s physics '
                f'({said}): ' + (f'likely {cause}' if cause else
                                 'no single mistake of the catalogue explains it: check the '
-                                'trial masses, radii, angles and planes, and the cells')
-               + ' (--accept-mismatch to go on)')
+                                'trial masses, radii, angles and planes, and the cells'))
     return ModelCheck(True, '', case.sensors, predicted, planes, True, cause, message)
 
 
@@ -367,22 +372,46 @@ def _explain(case, layout, permissible):
         scaled = 'kN' in text
         candidates.append((misfit(transform @ case.predicted),
                            not plausible or (scaled and typed_implausible), text))
-    # A common offset of every angle: the weights' angles counted from another zero.
-    overall = complex(np.sum(w * np.conj(case.predicted) * m))
-    if abs(overall) > 0.0:
-        turn = overall / abs(overall)
-        degrees = math.degrees(np.angle(turn))
-        if abs(degrees) > 10.0:
-            candidates.append((misfit(turn * case.predicted), False,
-                               f'every angle counted from another zero mark ({degrees:+.0f} '
-                               'deg off)'))
+    candidates += [(misfit(alpha), False, text) for alpha, text in _offsets(case)]
     if not candidates:
         return ''
     best = min(c[0] for c in candidates)
     if best > EXPLAINED or best > 0.5 * misfit(case.predicted):
         return ''
+    # Named mistakes before fitted offsets (which have a parameter to fit the noise with).
     near = sorted((c for c in candidates if c[0] <= 1.5 * best + 0.01),
-                  key=lambda c: (c[1], c[0]))
+                  key=lambda c: (c[1], 'deg off' in c[2], c[0]))
     plausible = [c for c in near if not c[1]] or near
     named = list(dict.fromkeys(c[2] for c in plausible))[:3]
     return ', or as well: '.join(named)
+
+
+def _offsets(case):
+    """Yield (coefficients, text) of angles offset: every trial's alike, or one trial's."""
+    w, m, p = case.weights, case.measured, case.predicted
+    overall = complex(np.sum(w * np.conj(p) * m))
+    if abs(overall) > 0.0 and abs(np.angle(overall)) > math.radians(10.0):
+        turn = overall / abs(overall)
+        yield turn * p, (f'every angle counted from another zero mark '
+                         f'({int(round(math.degrees(np.angle(turn)))):+d} deg off)')
+    if not case.trials or len(case.trials) < len(case.planes):
+        return
+    typed = trial_weights_on(case.trials, case.planes, case.keep_trial)
+    inverse = np.linalg.pinv(typed)
+    change = typed @ p.T                          # runs x sensors, as typed
+    for k, trial in enumerate(case.trials):
+        # Trial k's weight at angle + d: its own run's change turns by e^{id}.
+        alone = trial_weights_on(case.trials[k:k + 1], case.planes) @ p.T
+        runs = [k] + ([r for r in range(k + 1, len(case.trials))] if case.keep_trial else [])
+        measured_change = (typed @ m.T)
+        d = complex(np.sum(np.conj(alone) * (measured_change[k] - change[k] + alone)))
+        if abs(d) == 0.0 or abs(np.angle(d)) < math.radians(10.0):
+            continue
+        turn = d / abs(d)
+        shifted = change.copy()
+        for r in runs:
+            shifted[r] = shifted[r] + (turn - 1.0) * alone[0]
+        yield ((inverse @ shifted).T,
+               f'{_trial_text(k, trial)} at another angle than typed '
+               f'({int(round(math.degrees(np.angle(turn)))):+d} deg off: another hole, or '
+               'another zero mark)')

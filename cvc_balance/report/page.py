@@ -50,6 +50,32 @@ def _table(header, rows, text_columns=1, css=''):
     return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
 
 
+def _segment_row(segment, used):
+    layout = segment['layout']
+    steady = segment['steady']
+    grade = segment.get('grade')
+    return (segment['number'], f"{segment['from']:.3f}-{segment['to']:.3f}",
+            f"{layout['name']} ({layout['digest']})" if layout else 'none',
+            f"{steady['window'][0]:.3f}-{steady['window'][1]:.3f}" if steady
+            else segment['note'] or '-',
+            f"{steady['speed']:.4g}" if steady else '-',
+            steady['revolutions'] if steady else '-',
+            f"G {grade['equivalent_grade']:.2f}" if grade else '-',
+            'yes' if segment['number'] == used else '')
+
+
+def _check_html(check):
+    if not check['checked']:
+        return f'<p>Not checked: {escape(check["note"])}</p>'
+    rows = [(p['plane'], f"{p['factor']:.3g}", f"{p['phase_deg']:+.0f}",
+             'yes' if p['agrees'] else 'NO') for p in check['planes']]
+    said = ('The measured coefficients are what the layout\'s physics predicts for load cells '
+            'on a rigid rotor (within a factor 3 and 45 deg).' if check['agrees'] else
+            escape(check['message']))
+    return (_table(('plane', 'measured / predicted', 'phase [deg]', 'agrees'), rows)
+            + f'<p>{said}</p>')
+
+
 def page(summary, figures, generated=None):
     """
     Return the report's HTML text.
@@ -59,7 +85,7 @@ def page(summary, figures, generated=None):
     """
     generated = generated or datetime.datetime.now(datetime.timezone.utc)
     run, grade = summary['run'], summary['grade']
-    plan = next(p for p in summary['plans'] if p['name'] == summary['recommended'])
+    plan = next((p for p in summary['plans'] if p['name'] == summary['recommended']), None)
     layout = run['layout']
     title = f"Field balancing report: {layout['name'] if layout else run['bag']}"
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
@@ -69,10 +95,14 @@ def page(summary, figures, generated=None):
              f'layout {escape(layout["name"]) if layout else "none"} '
              f'(digest {escape(layout["digest"]) if layout else "-"})</p>']
     if grade is not None:
-        after = plan['after']['equivalent_grade'] if plan['after'] else None
-        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade']),
-                 _grade_box(f'after the {plan["name"]} plan (predicted)', after,
-                            grade['grade'])]
+        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade'])]
+        if plan is None:
+            boxes.append('<div class="out">after<b>no plan</b>every plan would leave the '
+                         'rotor worse</div>')
+        else:
+            after = plan['after']['equivalent_grade'] if plan['after'] else None
+            boxes.append(_grade_box(f'after the {plan["name"]} plan (predicted)', after,
+                                    grade['grade']))
         measured = summary.get('measured_after')
         if measured is not None:
             boxes.append(_grade_box('measured after', measured['equivalent_grade'],
@@ -85,7 +115,11 @@ def page(summary, figures, generated=None):
         parts.append('<div class="verdict" id="verdict">'
                      + _grade_box('grade', None, 0.0) + '</div>')
     parts.append('<h2 id="bolt">What to bolt where</h2>')
-    if plan['weights']:
+    if plan is None:
+        parts.append('<p id="no-plan"><b>Nothing: no plan is recommended.</b> Every plan '
+                     'would leave the rotor worse than it is now (see the warnings); check '
+                     'the coefficients and the trial runs.</p>')
+    elif plan['weights']:
         rows = [(w['plane'], _deg(w['angle_deg']), f"{w['radius']:.3f}",
                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
                 for w in plan['weights']]
@@ -150,6 +184,14 @@ def page(summary, figures, generated=None):
                          f"plane {q['plane']} {q['g_mm']:.0f} g mm" for q in
                          measured['planes'])))
     parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
+    segments = summary.get('segments') or []
+    if segments:
+        parts.append('<h2 id="segments">Layout segments of the run</h2>' + _table(
+            ('segment', 'from-to [s]', 'layout', 'steady stretch [s]', 'speed [rad/s]',
+             'revolutions', 'load cells', 'read'),
+            [_segment_row(s, run.get('segment')) for s in segments], 3))
+        parts.append('<p class="small">A run is read inside one layout segment, never across '
+                     'a layout change (--segment N to choose).</p>')
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
                           _deg(r['phase_deg']), f"{r['sigma']:.2g}")
@@ -165,6 +207,10 @@ def page(summary, figures, generated=None):
                      f'{"inf" if condition is None else f"{condition:.3g}"}; from '
                      + ', '.join(escape(f"{r['role']}: {r['bag']}")
                                  for r in coefficients['runs']) + '.</p>')
+        check = summary.get('model_check')
+        if check is not None:
+            parts.append('<h2 id="physics">Coefficients against the layout\'s physics</h2>'
+                         + _check_html(check))
     parts.append(f'<p class="small">cvc-balance report, generated '
                  f'{escape(generated.isoformat(timespec="seconds"))}.</p></body></html>')
     return '\n'.join(parts)
