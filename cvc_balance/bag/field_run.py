@@ -31,8 +31,10 @@ from cvc_balance.field import (calibrate, continuous_correction, continuous_plan
 from cvc_balance.field.correction import with_unbalance_limits
 from cvc_balance.field.coefficients import record_trials
 from cvc_balance.field.influence import CHI2_2DOF_95
-from cvc_balance.field.model_check import check_coefficients, ModelCheck, plane_positions
+from cvc_balance.field.model_check import (check_coefficients, ModelCheck, plane_positions,
+                                           predicted_coefficients)
 from cvc_balance.field.order_tracking import busiest_speed, DEFAULT_TOLERANCE
+from cvc_balance.field.trial_weight import advise
 from cvc_balance.identify import CellReadings, fit, identified_unbalance, Motion
 from cvc_balance.messages import topics
 from cvc_balance.physics import iso21940
@@ -350,6 +352,60 @@ def check_calibration(calibration, runs, trials, keep_trial=False):
                           'coefficients are not checked against physics')
     return check_coefficients(layout, calibration, baseline.window.speed, trials, keep_trial,
                               permissible_unbalance(layout, baseline.window.speed))
+
+
+def layout_sensors(layout):
+    """Return the load-cell channels a layout predicts: each support's force x, y (moments)."""
+    single = len(layout.supports) == 1
+    return [f'{s.name}/{c}' for s in layout.supports
+            for c in ('force_x', 'force_y') + (('torque_x', 'torque_y') if single else ())]
+
+
+def trial_advice(run_path=None, layout_file=None, standard_errors=20.0, sigma=None,
+                 speed=None, segment=None, tolerance=DEFAULT_TOLERANCE,
+                 joint_name='gantry_joint'):
+    """
+    Return (advice per plane, RunReadings or None, layout, speed): trial weights to use.
+
+    From a baseline run (its load cells' standard errors, its layout segment's layout or
+    ``layout_file``, its steady speed) or from ``layout_file`` alone (``sigma``: the 1x
+    standard error of the cells' readings, N, if known; ``speed`` rad/s, default the
+    layout's service speed). See :mod:`cvc_balance.field.trial_weight`.
+    """
+    run = None
+    if run_path is not None:
+        run = read_run(run_path, None, speed, tolerance, joint_name, layout_file,
+                       segment=segment)
+        layout, speed = run.layout, run.window.speed
+        if layout is None:
+            raise BagError(f'{run_path}: no layout in the run: give --layout-file')
+    else:
+        if layout_file is None:
+            raise ValueError('give a baseline run, or the layout with --layout-file')
+        from cvc_balance.physics.layout_file import load_layout
+        layout = load_layout(layout_file)
+        speed = speed or layout.balancing.service_speed
+        if not speed:
+            raise ValueError(f"{layout_file}: the layout has no balancing.service_speed: give "
+                             '--speed (rad/s of the trial runs)')
+    if layout.correction_planes() is None:
+        raise ValueError(f"layout '{layout.name}' has no two correction planes "
+                         '(balancing.planes, or two supports)')
+    planes = ('I', 'II')
+    sensors = layout_sensors(layout)
+    if run is not None:
+        sensors = [n for n in sensors if n in run.phasors]
+        if not sensors:
+            raise BagError(f'{run_path}: no load cell of the layout\'s supports in the run '
+                           '(supports/<name>/measured_load): no standard errors to size a '
+                           'trial by; give --layout-file alone for the starting rule')
+        sigma = [run.phasors[n].sigma for n in sensors]
+    elif sigma is not None:
+        sigma = [sigma] * len(sensors)
+    predicted, _ = predicted_coefficients(layout, sensors, planes, speed)
+    advice = advise(layout, planes, plane_positions(layout, planes), predicted, sensors,
+                    speed, sigma, standard_errors)
+    return advice, run, layout, speed
 
 
 @dataclass

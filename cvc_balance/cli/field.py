@@ -76,6 +76,32 @@ def register(commands):
     influence.add_argument('--json', action='store_true', help='print one JSON object')
     influence.set_defaults(run=run_influence)
 
+    trial = commands.add_parser(
+        'trial-weight', help='the trial weight to use per plane, before the trial runs',
+        description='Per correction plane, the trial mass at the plane\'s radius that moves '
+        'the load cells\' 1x readings by --standard-errors of the baseline run (their change '
+        'as the layout\'s physics predicts it), capped so that the trial alone adds no more '
+        'unbalance than the grade allows in its plane and no more rotating force than 10 %% '
+        'of a bearing\'s static load (the common starting rule, used when no baseline is '
+        'given), rounded up to the kit.')
+    trial.add_argument('bag', nargs='?', metavar='BASELINE', help='the baseline run (.mcap); '
+                       'without it, --layout-file alone')
+    trial.add_argument('--layout-file', metavar='FILE',
+                       help="the layout (default: the baseline's)")
+    trial.add_argument('--standard-errors', type=positive, default=20.0, metavar='N',
+                       help='how many standard errors of the baseline the trial should move '
+                       'the readings by (default 20)')
+    trial.add_argument('--sigma', type=positive, metavar='N',
+                       help="without a baseline: the cells' 1x standard error, N")
+    trial.add_argument('--speed', type=positive, metavar='W',
+                       help='the steady speed of the runs, rad/s (default: the baseline\'s, '
+                       "or the layout's service speed)")
+    trial.add_argument('--segment', type=segment_number, metavar='N',
+                       help='layout segment of the baseline to read')
+    _run_options(trial)
+    trial.add_argument('--json', action='store_true', help='print one JSON object')
+    trial.set_defaults(run=run_trial_weight)
+
     for name, helptext in (('correct', 'the corrections of a run, at the layout\'s sites'),
                            ('report', 'an HTML report of a run\'s corrections, with figures')):
         command = commands.add_parser(
@@ -304,6 +330,59 @@ def _number(value):
 def _deg(value):
     """Return an angle in degrees for people, 0.0-359.9 (359.97 reads 0.0)."""
     return f'{round(value, 1) % 360.0:.1f}'
+
+
+# -- trial-weight ------------------------------------------------------------------------
+
+def run_trial_weight(args):
+    """Run ``cvc-balance trial-weight``."""
+    from cvc_balance.bag.field_run import trial_advice
+
+    if args.bag is None and args.segment is not None:
+        raise ValueError('--segment needs a baseline run')
+    if args.bag is not None and args.sigma is not None:
+        raise ValueError("--sigma is for the layout alone: a baseline gives its own")
+    advice, run, layout, speed = trial_advice(
+        args.bag, args.layout_file, args.standard_errors, args.sigma, args.speed, args.segment,
+        args.speed_tolerance / 100.0, args.joint_name)
+    summary = plain({
+        'run': None if run is None else run_identity(run, 'baseline'),
+        'layout': _layout(layout), 'speed': speed, 'standard_errors': args.standard_errors,
+        'planes': [{'plane': a.plane, 'z': a.z, 'radius': a.radius, 'mass': a.mass,
+                    'unbalance_g_mm': a.unbalance * 1e6, 'standard_errors': a.standard_errors,
+                    'wanted_g_mm': None if a.wanted is None else a.wanted * 1e6,
+                    'grade_cap_g_mm': a.grade_cap * 1e6,
+                    'bearing_cap_g_mm': a.bearing_cap * 1e6
+                    if math.isfinite(a.bearing_cap) else None,
+                    'capped_by': a.capped_by,
+                    'kit': None if a.kit is None else {
+                        'masses': list(a.kit), 'mass': sum(a.kit),
+                        'standard_errors': a.kit_errors},
+                    'note': a.note or None} for a in advice]})
+    if args.json:
+        print_json(summary)
+        return 0
+    source = (f"baseline {run.bag}, {segment_line(segment_mapping(run.chosen))}"
+              if run is not None else f"layout '{layout.name}' alone")
+    lines = [f'trial weights at {speed:.4g} rad/s ({source}):']
+    for a in summary['planes']:
+        seen = '' if a['standard_errors'] is None else \
+            f", moves the readings {a['standard_errors']:.3g} standard errors"
+        lines.append(f"  plane {a['plane']} (z {a['z']:+.3f} m): {a['mass'] * 1000:.3g} g at r "
+                     f"{a['radius']:.3f} m ({a['unbalance_g_mm']:.0f} g mm){seen}")
+        if a['kit'] is not None:
+            kit = ' + '.join(f'{m * 1000:g} g' for m in a['kit']['masses'])
+            seen = '' if a['kit']['standard_errors'] is None else \
+                f" ({a['kit']['standard_errors']:.3g} standard errors)"
+            lines.append(f'    from the kit: {kit}{seen}')
+        caps = f"grade {a['grade_cap_g_mm']:.0f} g mm"
+        if a['bearing_cap_g_mm'] is not None:
+            caps += f", 10 % of a bearing's static load {a['bearing_cap_g_mm']:.0f} g mm"
+        lines.append(f'    caps: {caps}')
+        if a['note']:
+            lines.append(f"    {a['note']}")
+    print('\n'.join(lines))
+    return 0
 
 
 # -- influence (by hand) -----------------------------------------------------------------
