@@ -67,12 +67,25 @@ def register(commands):
                            help='baseline readings, one per sensor (170@112 53@78)')
     influence.add_argument('--trial', nargs='+', action='append', required=True,
                            metavar='ARG', help='PLANE MASS@DEG B1 B2 ...: one trial run '
-                           '(repeat per run)')
+                           '(repeat per run); MASS_KG@DEG,R_M gives the radius (kg m)')
     influence.add_argument('--keep-trial', action='store_true',
                            help='each trial weight stayed on for the runs after it')
     influence.add_argument('--noise', type=positive, metavar='X',
                            help="the readings' standard error (their unit): judge trials by "
                            'signal to noise instead of by relative change')
+    influence.add_argument('--sensors', nargs='+', metavar='NAME',
+                           help='a name per reading, in order (default sensor 1, 2, ...); '
+                           'load cells as <support>/force_x, <support>/force_y')
+    influence.add_argument('--unit', default='as read', metavar='TEXT',
+                           help="the readings' unit, for the record (default 'as read')")
+    influence.add_argument('--speed', type=positive, metavar='W',
+                           help='the runs\' steady speed, rad/s (for the record and the check)')
+    influence.add_argument('--layout-file', metavar='FILE',
+                           help="check the coefficients against this layout's physics: cells' "
+                           'readings in N, trials as MASS_KG@DEG,R_M')
+    _accept_mismatch(influence)
+    influence.add_argument('-o', '--output', metavar='FILE',
+                           help='save the coefficients as calibrate -o does (YAML)')
     influence.add_argument('--json', action='store_true', help='print one JSON object')
     influence.set_defaults(run=run_influence)
 
@@ -390,12 +403,20 @@ def run_trial_weight(args):
 def run_influence(args):
     """Run ``cvc-balance influence``."""
     import numpy as np
+    import yaml
 
+    from cvc_balance.bag.field_run import permissible_unbalance
     from cvc_balance.field import calibrate, continuous_correction, problem_from_readings
+    from cvc_balance.field.coefficients import calibration_mapping
+    from cvc_balance.field.model_check import check_coefficients, ModelCheck
     from cvc_balance.field.notation import hand_trial, reading
 
     baseline = [reading(text, f'baseline reading {k + 1}') for k, text in
                 enumerate(args.baseline)]
+    names = args.sensors or [f'sensor {k + 1}' for k in range(len(baseline))]
+    if len(names) != len(baseline) or len(set(names)) != len(names):
+        raise ValueError(f'--sensors: give {len(baseline)} different names, one per baseline '
+                         f'reading, got {len(names)}')
     trials, readings = [], []
     for k, values in enumerate(args.trial):
         if len(values) != 2 + len(baseline):
@@ -405,19 +426,45 @@ def run_influence(args):
         trials.append(hand_trial(values[0], values[1]))
         readings.append([reading(text, f'trial {k + 1} reading {s + 1}')
                          for s, text in enumerate(values[2:])])
+    if args.output:
+        check_output(args.output, [args.layout_file])
+    in_kg_m = all(',' in values[1] for values in args.trial)
+    if not in_kg_m and any(',' in values[1] for values in args.trial):
+        raise ValueError('--trial: give every trial weight with its radius (MASS_KG@DEG,R_M) '
+                         'or none')
     sigma = None if args.noise is None else np.full(len(baseline), args.noise)
-    calibration = calibrate(baseline, trials, readings, None, args.keep_trial, sigma,
+    calibration = calibrate(baseline, trials, readings, names, args.keep_trial, sigma,
                             None if sigma is None else np.tile(sigma, (len(trials), 1)))
-    problem = problem_from_readings(calibration, baseline, unit='trial mass unit')
+    layout, speed = None, args.speed
+    check = ModelCheck(False, 'no --layout-file: the coefficients are not checked against '
+                       'physics')
+    if args.layout_file:
+        from cvc_balance.physics.layout_file import load_layout
+        layout = load_layout(args.layout_file)
+        speed = speed or layout.balancing.service_speed
+        if not (in_kg_m and speed):
+            raise ValueError('--layout-file checks the coefficients against physics: give '
+                             'each trial weight as MASS_KG@DEG,R_M, the readings in N with '
+                             '--sensors naming each cell channel (front/force_x ...), and '
+                             '--speed (rad/s) unless the layout has a service speed')
+        check = check_coefficients(layout, calibration, speed, trials, args.keep_trial,
+                                   permissible_unbalance(layout, speed))
+        if check.mismatch and not args.accept_mismatch:
+            raise ValueError(check.refusal)
+    unit = 'kg m' if in_kg_m else 'trial mass unit'
+    problem = problem_from_readings(calibration, baseline, unit=unit)
     correction = continuous_correction(problem)
     residual = problem.residual(correction)
+    radius = {t.plane: t.radius for t in trials}
     summary = {
-        'planes': list(calibration.planes), 'sensors': len(baseline),
+        'planes': list(calibration.planes), 'sensors': len(baseline), 'sensor_names': names,
+        'unit': unit, 'speed': speed,
         'coefficients': [[_polar(v) for v in row] for row in calibration.matrix],
         'ci95': None if calibration.ci95 is None else calibration.ci95.tolist(),
         'condition_number': calibration.condition if math.isfinite(calibration.condition)
         else None,
-        'corrections': [{'plane': p, 'mass': abs(u),
+        'corrections': [{'plane': p, 'mass': abs(u) / radius[p], 'radius': radius[p]
+                         if in_kg_m else None, 'unbalance': abs(u),
                          'angle_deg': degrees(math.atan2(u.imag, u.real)) % 360.0}
                         for p, u in zip(calibration.planes, correction)],
         'residual': [_polar(r) for r in residual],
@@ -426,34 +473,56 @@ def run_influence(args):
         'trials': [{'run': c.run + 1, 'plane': c.plane, 'largest_change': c.change,
                     'snr': c.snr, 'relative_change': c.relative, 'too_small': c.too_small,
                     'weak': c.weak} for c in calibration.checks],
-        'warnings': list(calibration.warnings),
+        'model_check': check_mapping(check),
+        'warnings': ([check.message] if check.mismatch else []) + list(calibration.warnings),
     }
     if args.keep_trial:
         on = {p: 0j for p in calibration.planes}
         for trial in trials:
             on[trial.plane] += trial.unbalance
         summary['add_to_trials'] = [
-            {'plane': p, 'mass': abs(u - on[p]),
+            {'plane': p, 'mass': abs(u - on[p]) / radius[p],
              'angle_deg': degrees(math.atan2((u - on[p]).imag, (u - on[p]).real)) % 360.0}
             for p, u in zip(calibration.planes, correction)]
     warn(summary['warnings'])
+    if args.output:
+        runs = [{'role': 'baseline', 'source': 'by hand',
+                 'readings': [{'channel': n, **_polar(v)} for n, v in zip(names, baseline)]}]
+        runs += [{'role': f'trial {k + 1}', 'source': 'by hand',
+                  'readings': [{'channel': n, **_polar(v)} for n, v in zip(names, values)]}
+                 for k, values in enumerate(readings)]
+        record = calibration_mapping(calibration, [args.unit] * len(names), unit, speed,
+                                     args.keep_trial, trials, runs, _layout(layout),
+                                     check_mapping(check))
+        record['warnings'] = summary['warnings']
+        with replaced_when_done(args.output) as path:
+            path.write_text('# Influence coefficients (cvc-balance influence, readings by hand; '
+                            'README "Field balancing")\n' + yaml.safe_dump(plain(record),
+                                                                        sort_keys=False))
+        summary['written'] = args.output
     if args.json:
         print_json(summary)
         return 0
-    lines = [f"influence coefficients (reading per trial mass unit), condition number "
+    lines = [f"influence coefficients (reading per {unit}), condition number "
              f"{_number(summary['condition_number'])}:"]
-    for s, row in enumerate(summary['coefficients']):
-        lines.append(f'  sensor {s + 1}: ' + '   '.join(
+    for name, row in zip(names, summary['coefficients']):
+        lines.append(f'  {name}: ' + '   '.join(
             f"plane {p}: {e['amplitude']:.4g} @ {_deg(e['phase_deg'])}"
             for p, e in zip(summary['planes'], row)))
-    lines.append('corrections (remove the trial weights; same mass unit as the trials):')
+    if args.layout_file:
+        lines.append(check_line(summary['model_check']))
+    lines.append('corrections (remove the trial weights; ' + (
+        'kg at the trials\' radii):' if in_kg_m else 'same mass unit as the trials):'))
     for c in summary['corrections']:
-        lines.append(f"  plane {c['plane']}: {c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
+        at = f" at r {c['radius']:g} m" if c['radius'] else ''
+        lines.append(f"  plane {c['plane']}: {c['mass']:.4g}{at} @ {_deg(c['angle_deg'])} deg")
     for c in summary.get('add_to_trials', ()):
         lines.append(f"  with the trials left on, add in plane {c['plane']}: "
                      f"{c['mass']:.4g} @ {_deg(c['angle_deg'])} deg")
     lines.append('residual readings: ' + ', '.join(
         f"{r['amplitude']:.3g} @ {r['phase_deg']:.0f}" for r in summary['residual']))
+    if args.output:
+        lines.append(f'written: {args.output}')
     print('\n'.join(lines))
     return 0
 

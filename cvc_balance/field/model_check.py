@@ -379,11 +379,18 @@ def _explain(case, layout, permissible):
     if best > EXPLAINED or best > 0.5 * misfit(case.predicted):
         return ''
     # Named mistakes before fitted offsets (which have a parameter to fit the noise with).
+    # Plausible before not; named mistakes before the catch-alls (a fitted offset, a trial
+    # not on), which explain much with little said; then the best fit.
     near = sorted((c for c in candidates if c[0] <= 1.5 * best + 0.01),
-                  key=lambda c: (c[1], 'deg off' in c[2], c[0]))
-    plausible = [c for c in near if not c[1]] or near
-    named = list(dict.fromkeys(c[2] for c in plausible))[:3]
+                  key=lambda c: (c[1], _catch_all(c[2]), c[0]))
+    first = near[0]
+    named = list(dict.fromkeys(c[2] for c in near if c[1] == first[1]
+                               and _catch_all(c[2]) == _catch_all(first[2])))[:3]
     return ', or as well: '.join(named)
+
+
+def _catch_all(text):
+    return 'deg off' in text or 'no trial weight' in text
 
 
 def _offsets(case):

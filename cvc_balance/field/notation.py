@@ -60,12 +60,23 @@ def plane_name(text, what='plane'):
 
 
 def hand_trial(plane, text):
-    """Return the :class:`Trial` of a plane name and ``MASS@ANGLE_DEG`` (any mass unit)."""
+    """
+    Return the :class:`Trial` of a plane name and ``MASS@ANGLE_DEG`` (any mass unit).
+
+    ``MASS_KG@ANGLE_DEG,RADIUS_M`` gives the radius too: then kg and m.
+    """
+    radius = 1.0
+    if isinstance(text, str) and text.count(',') == 1:
+        text, radius_text = text.split(',')
+        radius = _number(radius_text.strip(), f'trial weight of plane {short(plane)}: radius',
+                         minimum=0.0)
+        if not radius > 0.0:
+            raise ValueError(f'trial weight of plane {short(plane)}: the radius must be > 0 m')
     mass, angle = polar_pair(text, f'trial weight of plane {short(plane)}')
     if not mass > 0.0:
         raise ValueError(f'trial weight of plane {short(plane)}: the mass must be > 0, '
                          f'got {short(text)}')
-    return Trial(plane_name(plane), mass, angle, 1.0)
+    return Trial(plane_name(plane), mass, angle, radius)
 
 
 def bag_trial(text):
@@ -74,12 +85,10 @@ def bag_trial(text):
     if not isinstance(text, str) or text.count(':') != 1 or text.count(',') != 1:
         raise ValueError(f'--trial: {form}, got {short(text)}')
     plane, rest = text.split(':')
-    weight, radius = rest.split(',')
-    trial = hand_trial(plane.strip(), weight.strip())
-    radius = _number(radius.strip(), f'--trial {short(text)}: radius', minimum=0.0)
-    if not radius > 0.0:
-        raise ValueError(f'--trial {short(text)}: the radius must be > 0 m')
-    return Trial(trial.plane, trial.mass, trial.angle, radius)
+    try:
+        return hand_trial(plane.strip(), rest.strip())
+    except ValueError as error:
+        raise ValueError(f'--trial {short(text)}: {error}') from None
 
 
 def polar_text(value, digits=4):
