@@ -473,6 +473,19 @@ class FieldCorrection:
     segment_grades: tuple = ()
 
 
+def _check_correction_masses(layout, planes, correction, radius, sites):
+    """Refuse corrections heavier than the whole rotor: the radius they sit at is wrong."""
+    mass = RotorModel.from_layout(layout).mass
+    for plane, value in zip(planes, correction):
+        r = radius.get(plane)
+        if r and abs(value) / r > mass:
+            where = f'balancing.sites.{plane}.radius' if plane in sites \
+                else 'balancing.correction_radius'
+            raise ValueError(f'plane {plane}: the correction needs {abs(value) / r:.3g} kg at '
+                             f'r {r:.3g} m ({where}), more than the whole rotor\'s '
+                             f'{mass:.4g} kg: that radius cannot be right')
+
+
 def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=1000.0,
                      time_constant=0.1):
     """
@@ -630,6 +643,8 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     if max_weights is None and objective == 'residual':
         max_weights = 2 * len(used_sites)
     continuous = continuous_correction(problem)
+    if layout is not None and problem.unit == 'kg m':
+        _check_correction_masses(layout, problem.planes, continuous, radius, sites)
     plans = [continuous_plan(problem, continuous)]
     if used_sites:
         plans.append(split_plan(problem, used_sites, continuous))
