@@ -381,7 +381,7 @@ def run_trial_weight(args):
     for a in summary['planes']:
         seen = '' if a['standard_errors'] is None else \
             f", moves the readings {a['standard_errors']:.3g} standard errors"
-        lines.append(f"  plane {a['plane']} (z {a['z']:+.3f} m): {a['mass'] * 1000:.3g} g at r "
+        lines.append(f"  plane {a['plane']} (z {a['z']:+.3f} m): {a['mass'] * 1000:.1f} g at r "
                      f"{a['radius']:.3f} m ({a['unbalance_g_mm']:.0f} g mm){seen}")
         if a['kit'] is not None:
             kit = ' + '.join(f'{m * 1000:g} g' for m in a['kit']['masses'])
@@ -497,8 +497,8 @@ def run_influence(args):
         record['warnings'] = summary['warnings']
         with replaced_when_done(args.output) as path:
             path.write_text('# Influence coefficients (cvc-balance influence, readings by hand; '
-                            'README "Field balancing")\n' + yaml.safe_dump(plain(record),
-                                                                        sort_keys=False))
+                            'README "Field balancing")\n'
+                            + yaml.safe_dump(plain(record), sort_keys=False))
         summary['written'] = args.output
     if args.json:
         print_json(summary)

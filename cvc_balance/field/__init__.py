@@ -17,7 +17,7 @@ from cvc_balance.field.correction import (BalancingProblem, continuous_correctio
                                           Residual)
 from cvc_balance.field.influence import calibrate, Calibration, Trial, TrialCheck
 from cvc_balance.field.order_tracking import (Phasor, steady_stretches, steady_window,
-                                             SteadyWindow, track)
+                                              SteadyWindow, track)
 from cvc_balance.field.plan import (continuous_plan, optimal_plan, PlacedWeight, Plan,
                                     round_to_kit, split_plan, vector_split)
 

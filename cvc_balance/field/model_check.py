@@ -187,8 +187,8 @@ def check_coefficients(layout, calibration, speed, trials=(), keep_trial=False,
         weights = 1.0 / np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300)) ** 2
     else:
         weights = np.ones(measured.shape)
-    case = _Case(measured, predicted[known], weights,
-                 tuple(n for n, k in zip(calibration.sensors, known) if k), tuple(calibration.planes),
+    compared = tuple(n for n, k in zip(calibration.sensors, known) if k)
+    case = _Case(measured, predicted[known], weights, compared, tuple(calibration.planes),
                  tuple(trials), keep_trial, calibration.ci95 is not None)
     planes = tuple(_agreement(case, j) for j in range(len(case.planes)))
     if all(p.agrees for p in planes):
@@ -359,8 +359,8 @@ def _explain(case, layout, permissible):
         inverse = np.linalg.pinv(typed)
         typed_implausible = permissible is not None and \
             _typed_unbalance(case.trials) > IMPLAUSIBLE_TRIAL * permissible
-        for text, true, keep, conjugate, plausible in _trial_mistakes(case, layout,
-                                                                     permissible):
+        mistakes = _trial_mistakes(case, layout, permissible)
+        for text, true, keep, conjugate, plausible in mistakes:
             change = trial_weights_on(true, case.planes, keep) @ case.predicted.T
             if conjugate:          # readings typed as the conjugates of the true ones
                 change = np.conj(change)
