@@ -29,7 +29,7 @@ from cvc_balance.field import (calibrate, continuous_correction, continuous_plan
                                optimal_plan, problem_from_readings, problem_from_unbalance,
                                split_plan, steady_stretches, track)
 from cvc_balance.field.correction import with_unbalance_limits
-from cvc_balance.field.coefficients import record_trials
+from cvc_balance.field.coefficients import at_speed, record_trials
 from cvc_balance.field.influence import CHI2_2DOF_95
 from cvc_balance.field.model_check import (check_coefficients, ModelCheck, plane_positions,
                                            predicted_coefficients)
@@ -415,7 +415,8 @@ class GradeView:
 
     ``planes`` names ('I', 'II'); ``z`` m; ``before`` complex kg m (identified) with its
     95 % radius ``ci95``; ``permissible`` kg m per plane; ``grade`` G mm/s at ``speed``
-    rad/s; ``mass`` kg and ``shares`` (ISO allocation) to turn amounts into a grade.
+    rad/s; ``mass`` kg and ``shares`` (ISO allocation) to turn amounts into a grade;
+    ``source`` what ``before`` comes from.
     """
 
     planes: tuple
@@ -427,6 +428,7 @@ class GradeView:
     speed: float
     mass: float
     shares: tuple
+    source: str = 'the load cells'
 
     def equivalent_grade(self, unbalance):
         """Return the G (mm/s) that per-plane unbalances (complex kg m) achieve."""
@@ -471,6 +473,284 @@ class FieldCorrection:
     max_weights: int = None
     model_check: object = None
     segment_grades: tuple = ()
+
+
+def _check_correction_masses(layout, planes, correction, radius, sites):
+    """Refuse corrections heavier than the whole rotor: the radius they sit at is wrong."""
+    mass = RotorModel.from_layout(layout).mass
+    for plane, value in zip(planes, correction):
+        r = radius.get(plane)
+        if r and abs(value) / r > mass:
+            where = f'balancing.sites.{plane}.radius' if plane in sites \
+                else 'balancing.correction_radius'
+            raise ValueError(f'plane {plane}: the correction needs {abs(value) / r:.3g} kg at '
+                             f'r {r:.3g} m ({where}), more than the whole rotor\'s '
+                             f'{mass:.4g} kg: that radius cannot be right')
+
+
+def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=1000.0,
+                     time_constant=0.1):
+    """
+    Return the RotorUnbalance the load cells identify over one :class:`Segment`, or None.
+
+    The segment's own layout and samples only (never across a layout change), the motion
+    and alpha as ``identify`` takes them; None without cells or when not identifiable.
+    """
+    if segment.layout is None:
+        return None
+    bag = open_bag(bag_path)
+    motion, _ = read_inputs(bag, joint_name)
+    t = motion.stamp * 1e-9
+    accepted, alpha = accepted_motion(t, motion.angle, motion.omega, max_speed, time_constant)
+    log = motion.log_time[accepted] * 1e-9
+    inside = (log >= segment.start) & (log <= segment.end)
+    if np.count_nonzero(inside) < 2:
+        return None
+    seg = Motion(t[accepted][inside], motion.angle[accepted][inside],
+                 motion.omega[accepted][inside], alpha[inside])
+    model = RotorModel.from_layout(segment.layout)
+    cells = {}
+    for name, cell in cell_readings(bag, model.supports).items():
+        keep = (cell.time >= seg.time[0]) & (cell.time <= seg.time[-1])
+        cells[name] = CellReadings(cell.support, cell.time[keep], cell.force[keep],
+                                   cell.torque[keep])
+    if not cells:
+        return None
+    estimate, _ = fit(model, seg, cells)
+    if not (estimate.readings and estimate.identifiable):
+        return None
+    return identified_unbalance(model, estimate)
+
+
+def grade_view(run, joint_name='gantry_joint', segment=None):
+    """
+    Return the :class:`GradeView` of a run (RunReadings) from its load cells, or None.
+
+    None when the bag has no load cells or no layout with two correction planes. The
+    cells are fitted over the run's layout segment (``segment``: another
+    :class:`Segment` of it, whose layout a layout file has replaced); the grade is
+    judged at the layout's service speed (default: the run's steady speed).
+    """
+    segment = run.chosen if segment is None else segment
+    layout = segment.layout
+    if layout is None or layout.correction_planes() is None:
+        return None
+    identified = identify_segment(run.bag, segment, joint_name)
+    if identified is None or not identified.planes:
+        return None
+    model = RotorModel.from_layout(layout)
+    z = layout.correction_planes()
+    planes = identified.planes
+    steady = segment.longest
+    speed = layout.balancing.service_speed or (steady.speed if steady else run.window.speed)
+    shares = iso21940.plane_shares(model.s_z / model.mass, *z)
+    u_per = iso21940.permissible_unbalance(layout.balancing.grade, model.mass, speed)
+    return GradeView(('I', 'II'), tuple(z), np.array([v.value for _, v in planes]),
+                     tuple(v.ci95 for _, v in planes), np.array([u_per * s for s in shares]),
+                     layout.balancing.grade, speed, model.mass, shares)
+
+
+def correct_run(run_path, calibration=None, record=None, layout_file=None,
+                objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
+                joint_name='gantry_joint', time_limit=30.0, segment=None,
+                accept_mismatch=False, speed=None):
+    """
+    Return the :class:`FieldCorrection` of a run (see the module's description).
+
+    With ``calibration`` (and its ``record``: speed, units) the run's readings of the
+    calibrated sensors are corrected (``limit``: largest residual reading allowed);
+    without, the unbalance its load cells identify is, against the layout's grade. Limits
+    keep the readings' (or the identification's) 95 % radius to spare. ``objective``
+    'fewest' (default when there are limits) or 'residual' (at most ``max_weights``
+    weights, default two per plane with sites). Sites and the grade come from
+    ``layout_file`` or the bag's layout; ``segment`` the layout segment to read (default:
+    the one with the longest steady stretch); ``speed`` the steady speed to read (default
+    the record's; coefficients made at another are scaled, :func:`~cvc_balance.field.
+    coefficients.at_speed`). Coefficients that disagree with the layout's physics raise
+    ValueError naming the likely mistake, unless ``accept_mismatch``.
+    """
+    warnings = []
+    speed = speed or (None if record is None else record.get('speed'))
+    sensors = None if calibration is None else list(calibration.sensors)
+    run = read_run(run_path, sensors, speed, tolerance, joint_name, layout_file,
+                   segment=segment)
+    layout = run.layout
+    grades = tuple(grade_view(run, joint_name=joint_name, segment=s) for s in run.segments)
+    grade = grades[run.segment - 1]
+    if calibration is None:
+        if grade is None:
+            raise BagError(f'{run_path}: no load cells to identify the unbalance from (topics '
+                           'supports/<name>/measured_load) or no layout with two correction '
+                           'planes: give --coefficients from trial runs')
+        problem = problem_from_unbalance(grade.planes, grade.before,
+                                         grade.permissible - np.asarray(grade.ci95))
+        if not np.all(problem.limits > 0.0):
+            raise ValueError('the identified unbalance is uncertain by more than the grade '
+                             'allows (95 % radius over U_per): record a longer run')
+        return _corrections(run, 'identified unbalance', problem, layout, grade, warnings,
+                            objective, max_weights, time_limit, None, grades)
+    calibration, check = _checked(calibration, record, layout, run.window.speed,
+                                  accept_mismatch, warnings)
+    names = list(calibration.sensors)
+    sigma = np.array([run.phasors[n].sigma for n in names])
+    # Each channel counts by its own noise: newtons and m/s^2 add up.
+    weights = 1.0 / np.maximum(sigma, 1e-12 * max(float(sigma.max()), 1e-300))
+    weights /= weights.mean()
+    limits = None
+    if limit is not None:
+        limits = float(limit) - math.sqrt(CHI2_2DOF_95) * sigma
+        if not np.all(limits > 0.0):
+            raise ValueError(f'--limit {limit:g} is within the readings\' own 95 % '
+                             f'uncertainty ({math.sqrt(CHI2_2DOF_95) * sigma.max():.3g}): '
+                             'no plan can be shown to meet it')
+    problem = problem_from_readings(calibration, [run.phasors[n].value for n in names],
+                                    weights, limits,
+                                    record.get('correction_unit', 'kg m') if record
+                                    else 'kg m')
+    if grade is not None and problem.unit == 'kg m':
+        # The grade limits the plan too: the identified unbalance plus the weights.
+        problem = with_unbalance_limits(problem, grade.planes, grade.before,
+                                        grade.permissible - np.asarray(grade.ci95))
+    elif grade is None:
+        grade = coefficient_grade(problem, layout, run.window.speed)
+    return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
+                        objective, max_weights, time_limit, check, grades)
+
+
+@dataclass
+class HandReadings:
+    """
+    Readings typed in by hand: ``readings`` {sensor: complex} at ``speed`` rad/s (or None).
+
+    ``units`` {sensor: unit}; ``layout`` the layout file's, or None.
+    """
+
+    readings: dict
+    units: dict
+    speed: float
+    layout: object
+
+
+def correct_readings(readings, calibration, record, layout_file=None, objective=None,
+                     limit=None, max_weights=None, speed=None, time_limit=30.0,
+                     accept_mismatch=False):
+    """
+    Return the :class:`FieldCorrection` of readings by hand with stored coefficients.
+
+    ``readings`` complex, one per sensor of the record, in its order; ``speed`` rad/s of
+    the readings (default the record's: a record made at another speed is scaled or
+    refused, :func:`~cvc_balance.field.coefficients.at_speed`); ``layout_file`` gives the
+    sites, the kit and the grade (the unbalance the readings imply through the
+    coefficients) and checks the coefficients against its physics. The same problem as
+    ``influence``'s: every sensor weighs alike, so the corrections equal a fresh
+    ``influence``'s to the bit.
+    """
+    warnings = []
+    readings = [complex(r) for r in readings]
+    if len(readings) != len(calibration.sensors):
+        raise ValueError(f'--readings: the coefficients name {len(calibration.sensors)} '
+                         f'sensors ({", ".join(calibration.sensors)}), got {len(readings)} '
+                         'readings')
+    layout = None
+    if layout_file is not None:
+        from cvc_balance.physics.layout_file import load_layout
+        layout = load_layout(layout_file)
+    speed = speed or (record or {}).get('speed')
+    calibration, check = _checked(calibration, record, layout, speed, accept_mismatch,
+                                  warnings)
+    unit = (record or {}).get('correction_unit', 'kg m')
+    limits = None if limit is None else np.full(len(readings), float(limit))
+    problem = problem_from_readings(calibration, readings, None, limits, unit)
+    units = list((record or {}).get('reading_units') or ['as read'] * len(readings))
+    run = HandReadings(dict(zip(calibration.sensors, readings)),
+                       dict(zip(calibration.sensors, units)), speed, layout)
+    grade = coefficient_grade(problem, layout, speed)
+    return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
+                        objective, max_weights, time_limit, check, ())
+
+
+def _checked(calibration, record, layout, speed, accept_mismatch, warnings):
+    """Return (coefficients at ``speed``, ModelCheck); the check's refusal raised."""
+    calibration, note = at_speed(calibration, record, speed)
+    if note:
+        warnings.append(note)
+    check = ModelCheck(False, 'no layout (give --layout): the coefficients are not checked '
+                       'against physics')
+    if layout is not None and speed:
+        check = check_coefficients(layout, calibration, speed, record_trials(record),
+                                   bool((record or {}).get('keep_trial')),
+                                   permissible_unbalance(layout, speed))
+    elif layout is not None:
+        check = ModelCheck(False, 'no speed of the readings (give --speed): the coefficients '
+                           'are not checked against physics')
+    if check.mismatch:
+        if not accept_mismatch:
+            raise ValueError(check.refusal)
+        warnings.append(check.message)
+    warnings += list(calibration.warnings)
+    return calibration, check
+
+
+def coefficient_grade(problem, layout, speed):
+    """
+    Return the :class:`GradeView` of the unbalance readings imply through coefficients.
+
+    The unbalance per plane is minus the continuous correction (what the corrections
+    cancel), kg m; None unless the corrections are in kg m for the layout's planes I and
+    II. No 95 % radius (the readings' noise is not known): 0.
+    """
+    if layout is None or problem.unit != 'kg m' or set(problem.planes) != {'I', 'II'} \
+            or layout.correction_planes() is None:
+        return None
+    before = -continuous_correction(problem)
+    order = [problem.planes.index(p) for p in ('I', 'II')]
+    model = RotorModel.from_layout(layout)
+    z = layout.correction_planes()
+    service = layout.balancing.service_speed or speed
+    if not service:
+        return None
+    shares = iso21940.plane_shares(model.s_z / model.mass, *z)
+    u_per = iso21940.permissible_unbalance(layout.balancing.grade, model.mass, service)
+    return GradeView(('I', 'II'), tuple(z), before[order], (0.0, 0.0),
+                     np.array([u_per * s for s in shares]), layout.balancing.grade, service,
+                     model.mass, shares, 'the readings through the coefficients')
+
+
+def _corrections(run, method, problem, layout, grade, warnings, objective, max_weights,
+                 time_limit, check, grades):
+    """Return the :class:`FieldCorrection`: the continuous, split and optimal plans."""
+    sites = {s.plane: s for s in layout.balancing.sites} if layout is not None else {}
+    radius = {}
+    for plane in problem.planes:
+        if plane in sites:
+            radius[plane] = sites[plane].radius
+        elif layout is not None and layout.correction_radius() > 0.0:
+            radius[plane] = layout.correction_radius()
+        else:
+            radius[plane] = None
+    unknown = [p for p in sites if p not in problem.planes]
+    if unknown:
+        warnings.append(f'the layout has weight sites for plane {", ".join(unknown)}, which '
+                        'the coefficients do not name: those sites are not used')
+    used_sites = {p: s for p, s in sites.items() if p in problem.planes}
+    if objective is None:
+        objective = 'fewest' if problem.limits is not None else 'residual'
+    if objective == 'fewest' and problem.limits is None:
+        raise ValueError('--objective fewest with coefficients needs --limit (the largest '
+                         'residual reading allowed, in the sensors\' units); or leave out '
+                         '--coefficients to plan on the identified unbalance against the grade')
+    if max_weights is None and objective == 'residual':
+        max_weights = 2 * len(used_sites)
+    continuous = continuous_correction(problem)
+    if layout is not None and problem.unit == 'kg m':
+        _check_correction_masses(layout, problem.planes, continuous, radius, sites)
+    plans = [continuous_plan(problem, continuous)]
+    if used_sites:
+        plans.append(split_plan(problem, used_sites, continuous))
+        plans.append(optimal_plan(problem, used_sites, objective, max_weights,
+                                  time_limit=time_limit))
+    return FieldCorrection(run, method, problem, plans, used_sites, radius, grade, warnings,
+                           objective, max_weights, check, grades)
 
 
 def _check_correction_masses(layout, planes, correction, radius, sites):

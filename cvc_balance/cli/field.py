@@ -126,10 +126,18 @@ def register(commands):
             'balancing.sites, each with the residual it leaves and the grade before and '
             'after.' + (' Writes DIR/report.html and its PNG figures.' if name == 'report'
                         else ''))
-        command.add_argument('bag', metavar='RUN', help='the run to correct (.mcap)')
+        command.add_argument('bag', metavar='RUN', nargs='?',
+                             help='the run to correct (.mcap); or --readings')
         command.add_argument('--coefficients', metavar='FILE',
-                             help='influence coefficients (from calibrate)')
-        command.add_argument('--layout', metavar='FILE',
+                             help='influence coefficients (from calibrate or influence -o)')
+        command.add_argument('--readings', nargs='+', metavar='A',
+                             help='readings by hand instead of a run, AMPLITUDE@PHASE_DEG, one '
+                             "per sensor in the coefficients' order (with --coefficients)")
+        command.add_argument('--speed', type=positive, metavar='W',
+                             help="the run's (or readings') steady speed, rad/s (default: the "
+                             "coefficients'; load cells' coefficients are scaled as the speed "
+                             'squared)')
+        command.add_argument('--layout', '--layout-file', metavar='FILE', dest='layout',
                              help="layout with balancing.sites (default: the bag's)")
         command.add_argument('--objective', choices=('fewest', 'residual'),
                              help='fewest weights within the grade (default with a grade '
@@ -549,12 +557,29 @@ def correction_summary(args):
     """Compute the corrections the arguments ask for; return (summary, FieldCorrection)."""
     from cvc_balance.bag.field_run import correct_run
 
+    from cvc_balance.bag.field_run import correct_readings
+    from cvc_balance.field.notation import reading
+
     calibration = record = None
     if args.coefficients:
         calibration, record = read_coefficients(args.coefficients)
+    if args.readings is not None:
+        if args.bag is not None or calibration is None:
+            raise ValueError('--readings: give the coefficients (--coefficients FILE) and no '
+                             'run')
+        if args.segment is not None:
+            raise ValueError('--segment is for a run, not --readings')
+        readings = [reading(text, f'reading {k + 1}') for k, text in enumerate(args.readings)]
+        result = correct_readings(readings, calibration, record, args.layout, args.objective,
+                                  args.limit, args.max_weights, args.speed, args.time_limit,
+                                  args.accept_mismatch)
+        return summarise(result, record), result
+    if args.bag is None:
+        raise ValueError('give the run to correct (RUN), or --readings with --coefficients')
     result = correct_run(args.bag, calibration, record, args.layout, args.objective,
                          args.limit, args.max_weights, args.speed_tolerance / 100.0,
-                         args.joint_name, args.time_limit, args.segment, args.accept_mismatch)
+                         args.joint_name, args.time_limit, args.segment, args.accept_mismatch,
+                         args.speed)
     return summarise(result, record), result
 
 
@@ -573,8 +598,8 @@ def run_report(args):
     """Run ``cvc-balance report``."""
     from cvc_balance.report import write_report
 
-    check_output(args.output, [args.bag, args.after, args.coefficients, args.layout],
-                 directory=True)
+    check_output(args.output, [a for a in (args.bag, args.after, args.coefficients,
+                                           args.layout) if a], directory=True)
     summary, result = correction_summary(args)
     if args.after:
         summary['measured_after'] = measured_after(args.after, args, result)
@@ -635,6 +660,26 @@ def _plane_vector(plane, z, value, ci95=None, permissible=None):
     return out
 
 
+def _run_mapping(run):
+    """Return what was corrected: a run's identity and window, or readings by hand."""
+    if getattr(run, 'window', None) is None:
+        return {'bag': None, 'source': 'readings by hand', 'date': None,
+                'layout': _layout(run.layout), 'speed': run.speed, 'revolutions': None,
+                'window': None, 'speed_spread': None, 'segment': None}
+    return {'bag': run.bag, 'source': 'run', 'date': bag_date(run.first_ns),
+            'layout': _layout(run.layout), 'speed': run.window.speed,
+            'revolutions': run.window.revolutions, 'window': [run.window.start, run.window.end],
+            'speed_spread': run.window.spread, 'segment': run.segment}
+
+
+def _readings(run):
+    if getattr(run, 'window', None) is None:
+        return [{'channel': n, 'unit': run.units[n], **_polar(v), 'sigma': None}
+                for n, v in run.readings.items()]
+    return [{'channel': n, 'unit': run.units[n], **_polar(p.value), 'sigma': p.sigma}
+            for n, p in run.phasors.items()]
+
+
 def summarise(result, record=None):
     """Return a FieldCorrection as JSON-able data (schema in the README)."""
     import numpy as np
@@ -648,18 +693,14 @@ def summarise(result, record=None):
                            'angles_deg': [degrees(a) % 360.0 for a in sites.angles],
                            'masses': list(sites.masses), 'stack': sites.stack}})
     summary = {
-        'run': {'bag': run.bag, 'date': bag_date(run.first_ns), 'layout': _layout(run.layout),
-                'speed': run.window.speed, 'revolutions': run.window.revolutions,
-                'window': [run.window.start, run.window.end],
-                'speed_spread': run.window.spread, 'segment': run.segment},
+        'run': _run_mapping(run),
         'segments': [dict(segment_mapping(s), grade=_segment_grade(g))
-                     for s, g in zip(run.segments, result.segment_grades)],
+                     for s, g in zip(getattr(run, 'segments', ()), result.segment_grades)],
         'model_check': None if result.model_check is None
         else check_mapping(result.model_check),
         'method': result.method, 'unit': problem.unit, 'objective': result.objective,
         'max_weights': result.max_weights, 'planes': planes,
-        'readings': [{'channel': n, 'unit': run.units[n], **_polar(p.value), 'sigma': p.sigma}
-                     for n, p in run.phasors.items()],
+        'readings': _readings(run),
         'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
     }
     if result.method == 'influence coefficients':
@@ -674,6 +715,7 @@ def summarise(result, record=None):
         before = grade.equivalent_grade(grade.before)
         summary['grade'] = {
             'grade': grade.grade, 'speed': grade.speed, 'mass': grade.mass,
+            'source': grade.source,
             'before': {'equivalent_grade': before, 'within_grade': before <= grade.grade,
                        'planes': [_plane_vector(p, z, u, ci, per) for p, z, u, ci, per in
                                   zip(grade.planes, grade.z, grade.before, grade.ci95,
@@ -770,9 +812,14 @@ def format_summary(summary):
     """Format a correction summary for people (g, g mm, degrees)."""
     run = summary['run']
     layout = run['layout']
-    lines = [f"run {run['bag']} ({run['date']}), layout "
-             + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
-             + f": {run['revolutions']} revolutions at {run['speed']:.4g} rad/s"]
+    speed = 'speed not given' if run['speed'] is None else f"at {run['speed']:.4g} rad/s"
+    if run['bag'] is None:
+        lines = [f"readings by hand {speed}, layout "
+                 + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')]
+    else:
+        lines = [f"run {run['bag']} ({run['date']}), layout "
+                 + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
+                 + f": {run['revolutions']} revolutions {speed}"]
     segments = summary.get('segments') or []
     for segment in segments:
         used = segment['number'] == run['segment']
@@ -793,7 +840,8 @@ def format_summary(summary):
                      f"({'within' if before['within_grade'] else 'OUT OF'} G {grade['grade']:g}"
                      f" at {grade['speed']:.4g} rad/s); " + ', '.join(
                          f"plane {p['plane']} {p['g_mm']:.0f} g mm at {_deg(p['angle_deg'])} deg "
-                         f"(allowed {p['permissible_g_mm']:.0f})" for p in before['planes']))
+                         f"(allowed {p['permissible_g_mm']:.0f})" for p in before['planes'])
+                     + f"; from {grade['source']}")
     for plan in summary['plans']:
         mark = ' (recommended)' if plan['name'] == summary['recommended'] else ''
         lines.append(f"{plan['name']}{mark}: {plan['status']}"
