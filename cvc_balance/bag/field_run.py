@@ -29,11 +29,13 @@ from cvc_balance.field import (calibrate, continuous_correction, continuous_plan
                                optimal_plan, problem_from_readings, problem_from_unbalance,
                                split_plan, steady_stretches, track)
 from cvc_balance.field.correction import with_unbalance_limits
+from cvc_balance.field.holes import site_of_hole
 from cvc_balance.field.coefficients import at_speed, record_trials
 from cvc_balance.field.influence import CHI2_2DOF_95
 from cvc_balance.field.model_check import (check_coefficients, ModelCheck, plane_positions,
                                            predicted_coefficients)
 from cvc_balance.field.order_tracking import busiest_speed, DEFAULT_TOLERANCE
+from cvc_balance.field.plan import PlacedWeight
 from cvc_balance.field.trial_weight import advise
 from cvc_balance.identify import CellReadings, fit, identified_unbalance, Motion
 from cvc_balance.messages import topics
@@ -458,7 +460,8 @@ class FieldCorrection:
     masses; ``grade`` a :class:`GradeView` or None (no load cells or layout);
     ``warnings`` one line each; ``objective`` and ``max_weights`` of the optimal plan;
     ``model_check`` the coefficients against the layout's physics (None without
-    coefficients); ``segment_grades`` a GradeView or None per segment of the run.
+    coefficients); ``segment_grades`` a GradeView or None per segment of the run;
+    ``existing`` the PlacedWeights on already (a trim).
     """
 
     run: RunReadings
@@ -473,6 +476,7 @@ class FieldCorrection:
     max_weights: int = None
     model_check: object = None
     segment_grades: tuple = ()
+    existing: tuple = ()
 
 
 def _check_correction_masses(layout, planes, correction, radius, sites):
@@ -553,7 +557,7 @@ def grade_view(run, joint_name='gantry_joint', segment=None):
 def correct_run(run_path, calibration=None, record=None, layout_file=None,
                 objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
                 joint_name='gantry_joint', time_limit=30.0, segment=None,
-                accept_mismatch=False, speed=None):
+                accept_mismatch=False, speed=None, weights_on=()):
     """
     Return the :class:`FieldCorrection` of a run (see the module's description).
 
@@ -567,7 +571,8 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     the one with the longest steady stretch); ``speed`` the steady speed to read (default
     the record's; coefficients made at another are scaled, :func:`~cvc_balance.field.
     coefficients.at_speed`). Coefficients that disagree with the layout's physics raise
-    ValueError naming the likely mistake, unless ``accept_mismatch``.
+    ValueError naming the likely mistake, unless ``accept_mismatch``. ``weights_on``: the
+    weights bolted on already (:func:`weights_on_sites`): the plans may take them off.
     """
     warnings = []
     speed = speed or (None if record is None else record.get('speed'))
@@ -588,7 +593,7 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
             raise ValueError('the identified unbalance is uncertain by more than the grade '
                              'allows (95 % radius over U_per): record a longer run')
         return _corrections(run, 'identified unbalance', problem, layout, grade, warnings,
-                            objective, max_weights, time_limit, None, grades)
+                            objective, max_weights, time_limit, None, grades, weights_on)
     calibration, check = _checked(calibration, record, layout, run.window.speed,
                                   accept_mismatch, warnings)
     names = list(calibration.sensors)
@@ -614,7 +619,7 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     elif grade is None:
         grade = coefficient_grade(problem, layout, run.window.speed)
     return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
-                        objective, max_weights, time_limit, check, grades)
+                        objective, max_weights, time_limit, check, grades, weights_on)
 
 
 @dataclass
@@ -633,7 +638,7 @@ class HandReadings:
 
 def correct_readings(readings, calibration, record, layout_file=None, objective=None,
                      limit=None, max_weights=None, speed=None, time_limit=30.0,
-                     accept_mismatch=False):
+                     accept_mismatch=False, weights_on=()):
     """
     Return the :class:`FieldCorrection` of readings by hand with stored coefficients.
 
@@ -666,7 +671,9 @@ def correct_readings(readings, calibration, record, layout_file=None, objective=
                        dict(zip(calibration.sensors, units)), speed, layout)
     grade = coefficient_grade(problem, layout, speed)
     return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
-                        objective, max_weights, time_limit, check, ())
+                        objective, max_weights, time_limit, check, (), weights_on,
+                        {t.plane: t.radius for t in record_trials(record)} if layout is None
+                        else {})
 
 
 def _checked(calibration, record, layout, speed, accept_mismatch, warnings):
@@ -716,10 +723,54 @@ def coefficient_grade(problem, layout, speed):
                      model.mass, shares, 'the readings through the coefficients')
 
 
+def weights_on_sites(layout, specs):
+    """
+    Return the PlacedWeights of weights bolted on already, at the layout's sites.
+
+    ``specs``: (plane, ('angle', rad) or ('hole', number), mass kg) each
+    (:func:`cvc_balance.field.notation.weight_on`). Raises ValueError naming a plane
+    without sites, an angle with no site, a hole that does not exist, or a site overfull.
+    """
+    if not specs:
+        return ()
+    sites = {s.plane: s for s in layout.balancing.sites} if layout is not None else {}
+    stacks = {}
+    for plane, (kind, where), mass in specs:
+        plane_sites = sites.get(plane)
+        if plane_sites is None:
+            raise ValueError(f'--weights-on: plane {plane} has no weight sites in the layout '
+                             f'(balancing.sites names {", ".join(sites) or "none"})')
+        if kind == 'hole':
+            angle = site_of_hole(plane_sites, where)
+        else:
+            angle = next((a for a in plane_sites.angles
+                          if abs(math.remainder(a - where, 2.0 * math.pi)) < 1e-6), None)
+            if angle is None:
+                raise ValueError(f'--weights-on: plane {plane} has no site at '
+                                 f'{math.degrees(where):g} deg (sites every '
+                                 f'{_site_list(plane_sites)})')
+        stacks.setdefault((plane, angle), []).append(mass)
+    out = []
+    for (plane, angle), masses in sorted(stacks.items()):
+        if len(masses) > sites[plane].stack:
+            raise ValueError(f'--weights-on: {len(masses)} weights at one site of plane {plane} '
+                             f'({math.degrees(angle):g} deg): its stack holds '
+                             f'{sites[plane].stack}')
+        out.append(PlacedWeight(plane, angle, sites[plane].radius,
+                                tuple(sorted(masses, reverse=True))))
+    return tuple(out)
+
+
+def _site_list(sites):
+    shown = ', '.join(f'{math.degrees(a):g}' for a in sorted(sites.angles)[:6])
+    return shown + (' ...' if len(sites.angles) > 6 else '') + ' deg'
+
+
 def _corrections(run, method, problem, layout, grade, warnings, objective, max_weights,
-                 time_limit, check, grades):
+                 time_limit, check, grades, weights_on=(), trial_radii=None):
     """Return the :class:`FieldCorrection`: the continuous, split and optimal plans."""
     sites = {s.plane: s for s in layout.balancing.sites} if layout is not None else {}
+    existing = weights_on_sites(layout, weights_on)
     radius = {}
     for plane in problem.planes:
         if plane in sites:
@@ -727,7 +778,7 @@ def _corrections(run, method, problem, layout, grade, warnings, objective, max_w
         elif layout is not None and layout.correction_radius() > 0.0:
             radius[plane] = layout.correction_radius()
         else:
-            radius[plane] = None
+            radius[plane] = (trial_radii or {}).get(plane)
     unknown = [p for p in sites if p not in problem.planes]
     if unknown:
         warnings.append(f'the layout has weight sites for plane {", ".join(unknown)}, which '
@@ -748,6 +799,6 @@ def _corrections(run, method, problem, layout, grade, warnings, objective, max_w
     if used_sites:
         plans.append(split_plan(problem, used_sites, continuous))
         plans.append(optimal_plan(problem, used_sites, objective, max_weights,
-                                  time_limit=time_limit))
+                                  time_limit=time_limit, existing=existing))
     return FieldCorrection(run, method, problem, plans, used_sites, radius, grade, warnings,
-                           objective, max_weights, check, grades)
+                           objective, max_weights, check, grades, existing)

@@ -133,6 +133,10 @@ def register(commands):
         command.add_argument('--readings', nargs='+', metavar='A',
                              help='readings by hand instead of a run, AMPLITUDE@PHASE_DEG, one '
                              "per sensor in the coefficients' order (with --coefficients)")
+        command.add_argument('--weights-on', nargs='+', metavar='PLANE:SITE:MASS',
+                             help='weights bolted on already, kg, at a site angle in degrees '
+                             'or #HOLE (I:15:0.2 II:#7:0.05): the plan says what to add and '
+                             'what to take off, with the fewest changes')
         command.add_argument('--speed', type=positive, metavar='W',
                              help="the run's (or readings') steady speed, rad/s (default: the "
                              "coefficients'; load cells' coefficients are scaled as the speed "
@@ -558,8 +562,9 @@ def correction_summary(args):
     from cvc_balance.bag.field_run import correct_run
 
     from cvc_balance.bag.field_run import correct_readings
-    from cvc_balance.field.notation import reading
+    from cvc_balance.field.notation import reading, weight_on
 
+    weights_on = [weight_on(text) for text in args.weights_on or ()]
     calibration = record = None
     if args.coefficients:
         calibration, record = read_coefficients(args.coefficients)
@@ -572,14 +577,14 @@ def correction_summary(args):
         readings = [reading(text, f'reading {k + 1}') for k, text in enumerate(args.readings)]
         result = correct_readings(readings, calibration, record, args.layout, args.objective,
                                   args.limit, args.max_weights, args.speed, args.time_limit,
-                                  args.accept_mismatch)
+                                  args.accept_mismatch, weights_on)
         return summarise(result, record), result
     if args.bag is None:
         raise ValueError('give the run to correct (RUN), or --readings with --coefficients')
     result = correct_run(args.bag, calibration, record, args.layout, args.objective,
                          args.limit, args.max_weights, args.speed_tolerance / 100.0,
                          args.joint_name, args.time_limit, args.segment, args.accept_mismatch,
-                         args.speed)
+                         args.speed, weights_on)
     return summarise(result, record), result
 
 
@@ -701,6 +706,7 @@ def summarise(result, record=None):
         'method': result.method, 'unit': problem.unit, 'objective': result.objective,
         'max_weights': result.max_weights, 'planes': planes,
         'readings': _readings(run),
+        'weights_on': [_placed(w, result.sites) for w in result.existing],
         'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
     }
     if result.method == 'influence coefficients':
@@ -777,7 +783,21 @@ def _residual(problem, residual):
             'rms': residual.rms, 'total': residual.total, 'worst_of_limit': residual.worst}
 
 
+def _placed(weight, sites):
+    """Return a PlacedWeight as plain data, with its hole number where the sites count them."""
+    from cvc_balance.field.holes import hole_of, hole_text
+
+    plane_sites = sites.get(weight.plane)
+    return {'plane': weight.plane, 'angle_deg': degrees(weight.angle) % 360.0,
+            'radius': weight.radius, 'masses': list(weight.masses), 'mass': weight.mass,
+            'hole': None if plane_sites is None else hole_of(plane_sites, weight.angle),
+            'hole_text': (hole_text(plane_sites, weight.angle) or None) if plane_sites
+            else None}
+
+
 def _plan(plan, problem, result, grade, unchanged):
+    from cvc_balance.field.plan import final_loading
+
     corrections = []
     for plane, u in zip(problem.planes, plan.corrections):
         radius = result.radius.get(plane)
@@ -799,13 +819,19 @@ def _plan(plan, problem, result, grade, unchanged):
         'name': plan.name, 'status': plan.status,
         'gap': plan.gap if math.isfinite(plan.gap) else None, 'note': plan.note,
         'corrections': corrections,
-        'weights': [{'plane': w.plane, 'angle_deg': degrees(w.angle) % 360.0,
-                     'radius': w.radius, 'masses': list(w.masses), 'mass': w.mass}
-                    for w in plan.weights],
+        'weights': [_placed(w, result.sites) for w in plan.weights],
+        'removed': [_placed(w, result.sites) for w in plan.removed],
+        'final': [_placed(w, result.sites) for w in final_loading(result.existing, plan)],
         'count': plan.count,
         'residual': _residual(problem, plan.residual),
         'after': after, 'worse': worse,
     }
+
+
+def _site_words(weight):
+    """Return 'plane I site  15.0 deg (hole 2, 15 deg from the mark with the rotation)'."""
+    text = f"plane {weight['plane']} site {_deg(weight['angle_deg']):>5} deg"
+    return text + (f" ({weight['hole_text']})" if weight.get('hole_text') else '')
 
 
 def format_summary(summary):
@@ -852,9 +878,15 @@ def format_summary(summary):
                     if c['mass'] is not None and summary['unit'] == 'kg m' \
                     else f"{c['unbalance']:.4g} {summary['unit']}"
                 lines.append(f"  plane {c['plane']}: {mass}, {_deg(c['angle_deg'])} deg")
-        for w in plan['weights']:
-            lines.append(f"  plane {w['plane']} site {_deg(w['angle_deg']):>5} deg: "
-                         + ' + '.join(f'{m * 1000:g} g' for m in w['masses']))
+        trim = bool(summary.get('weights_on'))
+        for verb, key in (('add: ' if trim else '', 'weights'), ('take off: ', 'removed')):
+            for w in plan[key]:
+                lines.append(f"  {verb}{_site_words(w)}: "
+                             + ' + '.join(f'{m * 1000:g} g' for m in w['masses']))
+        if trim and plan['name'] != 'continuous':
+            lines.append('  loading after: ' + ('; '.join(
+                f"{_site_words(w)}: " + ' + '.join(f'{m * 1000:g} g' for m in w['masses'])
+                for w in plan['final']) or 'none'))
         after = plan['after']
         residual = f"residual rms {plan['residual']['rms']:.3g}"
         if after is not None:

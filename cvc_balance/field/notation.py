@@ -95,3 +95,29 @@ def polar_text(value, digits=4):
     """Return a complex value as people write it: ``AMPLITUDE@PHASE_DEG`` (0-360 deg)."""
     degrees = math.degrees(cmath.phase(value)) % 360.0
     return f'{abs(value):.{digits}g}@{degrees:.1f}'
+
+
+def weight_on(text):
+    """
+    Return (plane, ('angle', rad) or ('hole', n), mass kg) of ``PLANE:SITE:MASS_KG``.
+
+    SITE is the site's angle in degrees (I:15:0.2) or its hole number (I:#7:0.2): a weight
+    bolted on already.
+    """
+    form = 'give PLANE:SITE:MASS_KG, SITE an angle in degrees or #HOLE (I:15:0.2, I:#7:0.2)'
+    if not isinstance(text, str) or text.count(':') != 2:
+        raise ValueError(f'--weights-on: {form}, got {short(text)}')
+    plane, site, mass = (part.strip() for part in text.split(':'))
+    plane = plane_name(plane, f'--weights-on {short(text)}: plane')
+    mass = _number(mass, f'--weights-on {short(text)}: mass', minimum=0.0)
+    if not mass > 0.0:
+        raise ValueError(f'--weights-on {short(text)}: the mass must be > 0 kg')
+    if site.startswith('#'):
+        if not site[1:].isdigit() or not 1 <= int(site[1:]) <= 100_000:
+            raise ValueError(f'--weights-on {short(text)}: a hole is #1, #2, ...')
+        return plane, ('hole', int(site[1:])), mass
+    degrees = _number(site, f'--weights-on {short(text)}: site angle')
+    if abs(degrees) > MAX_DEGREES:
+        raise ValueError(f'--weights-on {short(text)}: the angle must be within '
+                         f'+-{MAX_DEGREES:g} deg')
+    return plane, ('angle', math.radians(degrees)), mass

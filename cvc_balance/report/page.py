@@ -50,6 +50,13 @@ def _table(header, rows, text_columns=1, css=''):
     return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
 
 
+def _hole(weight):
+    """Return the hole as people count it ('7: 90 deg from the mark ...'), or '-'."""
+    if not weight.get('hole'):
+        return '-'
+    return weight['hole_text'].removeprefix('hole ').replace(', ', ': ', 1)
+
+
 def _segment_row(segment, used):
     layout = segment['layout']
     steady = segment['steady']
@@ -119,12 +126,21 @@ def page(summary, figures, generated=None):
         parts.append('<p id="no-plan"><b>Nothing: no plan is recommended.</b> Every plan '
                      'would leave the rotor worse than it is now (see the warnings); check '
                      'the coefficients and the trial runs.</p>')
-    elif plan['weights']:
-        rows = [(w['plane'], _deg(w['angle_deg']), f"{w['radius']:.3f}",
+    elif plan['weights'] or plan.get('removed'):
+        trim = bool(summary.get('weights_on'))
+        rows = [(w['plane'], _deg(w['angle_deg']), _hole(w), f"{w['radius']:.3f}",
                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
-                for w in plan['weights']]
-        parts.append(_table(('plane', 'site angle [deg]', 'radius [m]', 'weights',
-                             'total [g]'), rows, 1, 'bolt'))
+                + ((action,) if trim else ())
+                for action, key in (('add', 'weights'), ('take off', 'removed'))
+                for w in plan.get(key, ())]
+        parts.append(_table(('plane', 'site angle [deg]', 'hole', 'radius [m]', 'weights',
+                             'total [g]') + (('do',) if trim else ()), rows, 1, 'bolt'))
+        if trim:
+            parts.append('<h2 id="loading">Loading after, per site</h2>' + _table(
+                ('plane', 'site angle [deg]', 'hole', 'weights', 'total [g]'),
+                [(w['plane'], _deg(w['angle_deg']), _hole(w),
+                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
+                 for w in plan['final']], 1))
         if plan['name'] == 'split':
             how = 'the vector split of the continuous correction, rounded to the kit'
         elif summary['objective'] == 'fewest':
@@ -132,7 +148,7 @@ def page(summary, figures, generated=None):
                 f'{plan["status"]})'
         else:
             how = f'the smallest residual with at most {summary["max_weights"]} weights ' \
-                f'(mixed-integer plan, HiGHS: {plan["status"]})'
+                f'(proven by enumeration or HiGHS: {plan["status"]})'
         parts.append(f'<p>{plan["count"]} weights: {escape(how)}. Angles in the rotor frame, '
                      'from rotor X toward rotor Y; radius of the weights\' centres.</p>')
     else:
