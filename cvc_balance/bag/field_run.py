@@ -505,7 +505,8 @@ def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=100
     bag = open_bag(bag_path)
     motion, _ = read_inputs(bag, joint_name)
     t = motion.stamp * 1e-9
-    accepted, alpha = accepted_motion(t, motion.angle, motion.omega, max_speed, time_constant)
+    accepted, alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle, motion.omega,
+                                      max_speed, time_constant)
     log = motion.log_time[accepted] * 1e-9
     inside = (log >= segment.start) & (log <= segment.end)
     if np.count_nonzero(inside) < 2:
