@@ -95,6 +95,17 @@ def test_readings_by_hand_with_stored_coefficients_equal_influence(capsys, tmp_p
         pytest.approx([abs(u) * 1e6 for u in unbalance], rel=1e-12)
     code, _, err = run(capsys, 'correct', '--coefficients', record, '--readings', '1@0')
     assert code == 2 and 'the coefficients name 4 sensors' in err and 'got 1 readings' in err
+    # The same report as from a run, with the readings' source said.
+    code, out, err = run(capsys, 'report', '--coefficients', record, '--readings',
+                         *readings['baseline'], '--layout', FIELD_LAYOUT, '-o',
+                         tmp_path / 'report', '--json')
+    assert code == 0, err
+    page = (tmp_path / 'report' / 'report.html').read_text()
+    assert 'readings by hand; layout ct_gantry_field' in page
+    assert 'Unbalance before (from the readings through the coefficients)' in page
+    plan = json.loads(out)['summary']['plans'][-1]
+    for w in plan['weights']:
+        assert ' + '.join(f'{m * 1000:g} g' for m in w['masses']) in page
 
 
 def field_run(folder, name, speed, extra, seed):

@@ -94,11 +94,14 @@ def page(summary, figures, generated=None):
     run, grade = summary['run'], summary['grade']
     plan = next((p for p in summary['plans'] if p['name'] == summary['recommended']), None)
     layout = run['layout']
-    title = f"Field balancing report: {layout['name'] if layout else run['bag']}"
+    by_hand = run['bag'] is None
+    title = f"Field balancing report: {layout['name'] if layout else run['bag'] or 'readings'}"
+    source = 'readings by hand' if by_hand else \
+        f'run {escape(run["bag"])}, recorded {escape(run["date"])}'
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
              f'<title>{escape(title)}</title><style>{STYLE}</style></head><body>',
              f'<h1>{escape(title)}</h1>',
-             f'<p class="small">run {escape(run["bag"])}, recorded {escape(run["date"])}; '
+             f'<p class="small">{source}; '
              f'layout {escape(layout["name"]) if layout else "none"} '
              f'(digest {escape(layout["digest"]) if layout else "-"})</p>']
     if grade is not None:
@@ -185,14 +188,21 @@ def page(summary, figures, generated=None):
         rows = [(q['plane'], f"{q['z']:+.3f}", f"{q['g_mm']:.0f}", _deg(q['angle_deg']),
                  f"{q['ci95_g_mm']:.0f}" if q.get('ci95_g_mm') is not None else '-',
                  f"{q['permissible_g_mm']:.0f}") for q in grade['before']['planes']]
-        parts.append('<h2>Unbalance before (identified from the load cells)</h2>'
+        origin = escape(grade.get('source', 'the load cells'))
+        parts.append(f'<h2>Unbalance before (from {origin})</h2>'
                      + _table(('plane', 'z [m]', 'U [g mm]', 'angle [deg]', '95 % [g mm]',
                                'allowed [g mm]'), rows))
-    rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
-            ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
-            ('steady speed', f"{run['speed']:.5g} rad/s (spread {run['speed_spread']:.2%})"),
-            ('read over', f"{run['revolutions']} whole revolutions, {run['window'][0]:.3f}-"
-                          f"{run['window'][1]:.3f} s")]
+    if by_hand:
+        rows = [('readings', 'by hand'),
+                ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+                ('speed', f"{run['speed']:.5g} rad/s" if run['speed'] else 'not given')]
+    else:
+        rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
+                ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+                ('steady speed', f"{run['speed']:.5g} rad/s (spread "
+                                 f"{run['speed_spread']:.2%})"),
+                ('read over', f"{run['revolutions']} whole revolutions, "
+                              f"{run['window'][0]:.3f}-{run['window'][1]:.3f} s")]
     measured = summary.get('measured_after')
     if measured is not None:
         rows.append(('check run after', f"{measured['bag']} ({measured['date']}): G "
@@ -210,7 +220,8 @@ def page(summary, figures, generated=None):
                      'a layout change (--segment N to choose).</p>')
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
-                          _deg(r['phase_deg']), f"{r['sigma']:.2g}")
+                          _deg(r['phase_deg']),
+                          '-' if r['sigma'] is None else f"{r['sigma']:.2g}")
                          for r in summary['readings']], 2))
     coefficients = summary['coefficients']
     if coefficients is not None:
