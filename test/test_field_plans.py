@@ -25,7 +25,7 @@ from cvc_balance.field.coefficients import calibration_from_mapping, calibration
 from cvc_balance.field.holes import hole_numbers, hole_text
 from cvc_balance.field.plan import PlacedWeight
 from cvc_balance.physics.layout import LayoutError, parse_layout, WeightSites
-from test_field import brute_force, gauge, K, plane_options, synthetic, TURNS
+from test_field import brute_force, gauge, K, KITS, plane_options, synthetic, TURNS
 
 ROOT = Path(__file__).resolve().parents[1]
 BAGS = ROOT / 'bags'
@@ -151,24 +151,11 @@ def test_coefficients_made_at_another_speed_are_scaled_for_load_cells(capsys, tm
 
 # -- the plan search ---------------------------------------------------------------------
 
-SMALL_KITS = {
-    'coupled, 4 sites x 2 sizes': ({'I': WeightSites('I', tuple(np.radians([0, 60, 150, 240])),
-                                                     0.5, (0.1, 0.25), 1),
-                                    'II': WeightSites('II', tuple(np.radians([30, 120, 200,
-                                                                              300])),
-                                                      0.6, (0.1, 0.25), 1)}, 3),
-    'stacks of 2': ({'I': WeightSites('I', tuple(np.radians([0, 90, 180, 270])), 0.5,
-                                      (0.1, 0.3), 2),
-                     'II': WeightSites('II', tuple(np.radians([45, 165, 285])), 0.5,
-                                       (0.2,), 2)}, 4),
-}
-
-
-@pytest.mark.parametrize('kit', sorted(SMALL_KITS))
+@pytest.mark.parametrize('kit', sorted(KITS))
 @pytest.mark.parametrize('cap', [1, 2, 3, 4])
 @pytest.mark.parametrize('seed', range(3))
 def test_the_search_is_the_enumerations_best(kit, cap, seed):
-    sites, sensors = SMALL_KITS[kit]
+    sites, sensors = KITS[kit]
     rng = np.random.default_rng(300 + seed)
     alpha, baseline = synthetic(rng, sensors, 2)
     problem = BalancingProblem(('I', 'II'), tuple('abcd'[:sensors]), 0.3 * baseline, alpha,

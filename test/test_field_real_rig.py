@@ -20,30 +20,21 @@ import math
 import numpy as np
 import pytest
 
-from cvc_balance.bag.readings import bag_readings
 from cvc_balance.field import calibrate, continuous_correction, problem_from_readings, Trial
-from test_real_rig import load_run, RECORDINGS, run_bag, RUNS, SOURCE
+from test_real_rig import readings as rig_readings, RUNS  # noqa: F401 (its fixture)
 
 TRIAL = Trial('I', 0.060, 0.0, 1.0)           # grams: the corrections come out in grams
 
 
 @pytest.fixture(scope='module')
-def runs(tmp_path_factory):
+def runs(rig_readings):  # noqa: F811 (the fixture imported above)
     """{(case, run): (1x over the speed squared, complex counts s^2, speed rev/s)}."""
-    if not (RECORDINGS / 'without_weight' / '100.p').is_file():
-        pytest.skip(f'the real recording is not in {RECORDINGS}: copy {SOURCE} there '
-                    '(docs/guide/real_data.md)')
-    folder = tmp_path_factory.mktemp('rig')
     out = {}
-    for case in ('without_weight', 'weight'):
-        for name in RUNS:
-            bag = run_bag(load_run(RECORDINGS / case / name), folder / f'{case}_{name}.mcap')
-            longest = max(bag_readings(bag, units={'accel': 'counts'}).segments,
-                          key=lambda s: s.revolutions)
-            reading = longest.channels[0]
-            # A suspended body far below its resonance: the 1x grows as the speed squared.
-            out[case, name] = (reading.amplitude * np.exp(1j * math.radians(reading.phase_deg))
-                               / longest.speed ** 2, longest.speed / (2 * math.pi))
+    for key, (_, longest, _, _) in rig_readings.items():
+        reading = longest.channels[0]
+        # A suspended body far below its resonance: the 1x grows as the speed squared.
+        out[key] = (reading.amplitude * np.exp(1j * math.radians(reading.phase_deg))
+                    / longest.speed ** 2, longest.speed / (2 * math.pi))
     return out
 
 
