@@ -384,8 +384,11 @@ BAD_RECORDS = {
                       ('amplitude', 'finite')),
     'text phase': (lambda r: r['coefficients'][0][1].update(phase_deg='north'),
                    ('phase_deg', 'number')),
-    'singular': (lambda r: [row[1].update(amplitude=0.0) for row in r['coefficients']],
-                 ('singular',)),
+    'singular': (lambda r: [row[1].update(amplitude=0.0, re=0.0, im=0.0)
+                            for row in r['coefficients']], ('singular',)),
+    'edited by hand': (lambda r: r['coefficients'][0][0].update(amplitude=1.0),
+                       ('re, im', 'disagree with amplitude 1 at')),
+    're without im': (lambda r: r['coefficients'][0][0].pop('im'), ('both re, im or neither',)),
 }
 
 

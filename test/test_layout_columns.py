@@ -79,6 +79,11 @@ def canonical_by_asdict(layout):
     data = asdict(as_tuple(layout))
     if not layout.balancing.sites:
         del data['balancing']['sites']
+    # Fields added later appear only when given (older layouts keep their digests).
+    for plane_sites in data['balancing'].get('sites', ()):
+        for key in ('first_hole', 'numbering', 'rotation'):
+            if plane_sites[key] is None:
+                del plane_sites[key]
     return json.dumps(data, sort_keys=True, separators=(',', ':'))
 
 

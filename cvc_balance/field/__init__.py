@@ -16,12 +16,13 @@ from cvc_balance.field.correction import (BalancingProblem, continuous_correctio
                                           problem_from_readings, problem_from_unbalance,
                                           Residual)
 from cvc_balance.field.influence import calibrate, Calibration, Trial, TrialCheck
-from cvc_balance.field.order_tracking import Phasor, steady_window, SteadyWindow, track
+from cvc_balance.field.order_tracking import (Phasor, steady_stretches, steady_window,
+                                              SteadyWindow, track)
 from cvc_balance.field.plan import (continuous_plan, optimal_plan, PlacedWeight, Plan,
                                     round_to_kit, split_plan, vector_split)
 
 __all__ = ['BalancingProblem', 'calibrate', 'Calibration', 'continuous_correction',
            'continuous_plan', 'optimal_plan', 'Phasor', 'PlacedWeight', 'Plan',
            'problem_from_readings', 'problem_from_unbalance', 'Residual', 'round_to_kit',
-           'split_plan', 'steady_window', 'SteadyWindow', 'track', 'Trial', 'TrialCheck',
-           'vector_split']
+           'split_plan', 'steady_stretches', 'steady_window', 'SteadyWindow', 'track', 'Trial',
+           'TrialCheck', 'vector_split']

@@ -10,22 +10,33 @@ unknown fields are errors, numbers finite and bounded, one line naming what is w
 """
 
 import cmath
+from dataclasses import replace
 import math
 
 import numpy as np
 
-from cvc_balance.field.influence import Calibration
+from cvc_balance.field.influence import Calibration, checked_condition, Trial
 from cvc_balance.physics.layout import MAX_MAGNITUDE, short
 
+AGREE = 1e-6
+"""How closely a record's re, im must agree with its amplitude and phase (relative)."""
 KIND = 'cvc_balance influence coefficients'
 VERSION = 1
 FIELDS = ('kind', 'version', 'planes', 'sensors', 'reading_units', 'correction_unit', 'speed',
           'condition_number', 'coefficients', 'ci95', 'keep_trial', 'trials', 'runs',
-          'layout', 'warnings')
+          'layout', 'model_check', 'warnings')
 
 
 class CoefficientsError(ValueError):
     """A coefficient record that cannot be used; ``str()`` is one line naming what."""
+
+
+def condition_number(matrix, what='the coefficients'):
+    """Return the condition number of coefficients; CoefficientsError when singular."""
+    try:
+        return checked_condition(matrix, what)
+    except ValueError as error:
+        raise CoefficientsError(str(error)) from None
 
 
 def polar(value):
@@ -34,15 +45,22 @@ def polar(value):
     return {'amplitude': abs(value), 'phase_deg': math.degrees(cmath.phase(value)) % 360.0}
 
 
+def exact(value):
+    """Return a coefficient as {amplitude, phase_deg} for people and {re, im} to the bit."""
+    value = complex(value)
+    return {**polar(value), 're': value.real, 'im': value.imag}
+
+
 def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
-                        keep_trial=False, trials=(), runs=(), layout=None):
+                        keep_trial=False, trials=(), runs=(), layout=None, model_check=None):
     """
     Return the record of ``calibration`` as plain data (YAML/JSON-able).
 
     ``reading_units`` one per sensor; ``correction_unit`` the unbalance unit ('kg m', or
     the trial's mass unit); ``speed`` rad/s or None; ``trials`` the
     :class:`~cvc_balance.field.influence.Trial` per run; ``runs`` per run identity
-    mappings; ``layout`` {name, digest} or None.
+    mappings; ``layout`` {name, digest} or None; ``model_check`` the coefficients
+    against the layout's physics (plain data) or None.
     """
     ci95 = None if calibration.ci95 is None else np.asarray(calibration.ci95).tolist()
     checks = []
@@ -60,9 +78,10 @@ def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
         'reading_units': list(reading_units), 'correction_unit': correction_unit,
         'speed': None if speed is None else float(speed),
         'condition_number': condition if math.isfinite(condition) else None,
-        'coefficients': [[polar(v) for v in row] for row in np.asarray(calibration.matrix)],
+        'coefficients': [[exact(v) for v in row] for row in np.asarray(calibration.matrix)],
         'ci95': ci95, 'keep_trial': bool(keep_trial), 'trials': checks, 'runs': list(runs),
-        'layout': layout, 'warnings': list(calibration.warnings),
+        'layout': layout, 'model_check': model_check,
+        'warnings': list(calibration.warnings),
     }
 
 
@@ -125,15 +144,30 @@ def calibration_from_mapping(data, source='coefficients'):
             raise CoefficientsError(f'{source}: field {key} must be a list')
     if not isinstance(data.get('keep_trial', False), bool):
         raise CoefficientsError(f'{source}: field keep_trial must be true or false')
-    singular = np.linalg.svd(matrix, compute_uv=False)
-    if not singular[-1] > 0.0:
-        raise CoefficientsError(f'{source}: the coefficients are singular (a plane acts on '
-                                'no sensor, or two planes alike): no correction follows')
-    calibration = Calibration(tuple(planes), tuple(sensors), matrix, ci95,
-                              float(singular[0] / singular[-1]), (), tuple(warnings))
+    condition = condition_number(matrix, f'{source}: the coefficients')
+    calibration = Calibration(tuple(planes), tuple(sensors), matrix, ci95, condition, (),
+                              tuple(warnings))
     record = dict(data, reading_units=units, speed=speed,
                   correction_unit=data.get('correction_unit', 'kg m'))
     return calibration, record
+
+
+def record_trials(record):
+    """
+    Return the typed trials of a record's ``trials`` as :class:`Trial` (kg, rad, m).
+
+    () when the record has none or any is incomplete (then no mistake can be named).
+    """
+    trials = []
+    for entry in (record or {}).get('trials') or ():
+        try:
+            values = [float(entry[k]) for k in ('mass', 'angle_deg', 'radius')]
+        except (KeyError, TypeError, ValueError):
+            return ()
+        if not (isinstance(entry.get('plane'), str) and all(map(math.isfinite, values))):
+            return ()
+        trials.append(Trial(entry['plane'], values[0], math.radians(values[1]), values[2]))
+    return tuple(trials)
 
 
 def _names(value, where):
@@ -166,10 +200,56 @@ def _number(value, where):
 
 
 def _polar(entry, where):
-    if not isinstance(entry, dict) or set(entry) != {'amplitude', 'phase_deg'}:
-        raise CoefficientsError(f'{where}: give {{amplitude, phase_deg}}, got {short(entry)}')
+    if not isinstance(entry, dict) or not {'amplitude', 'phase_deg'} <= set(entry) \
+            or not set(entry) <= {'amplitude', 'phase_deg', 're', 'im'} \
+            or len({'re', 'im'} & set(entry)) == 1:
+        raise CoefficientsError(f'{where}: give {{amplitude, phase_deg}} (and both re, im or '
+                                f'neither), got {short(entry)}')
     amplitude = _number(entry['amplitude'], f'{where}.amplitude')
     if amplitude < 0.0:
         raise CoefficientsError(f'{where}.amplitude must be >= 0, got {amplitude:g}')
     phase = _number(entry['phase_deg'], f'{where}.phase_deg')
-    return cmath.rect(amplitude, math.radians(phase))
+    value = cmath.rect(amplitude, math.radians(phase))
+    if 're' in entry:
+        # The exact value calibrate wrote; amplitude and phase are its rounding for people.
+        stored = complex(_number(entry['re'], f'{where}.re'), _number(entry['im'], f'{where}.im'))
+        if abs(stored - value) > AGREE * max(abs(stored), amplitude):
+            raise CoefficientsError(f'{where}: re, im ({stored.real:.6g}, {stored.imag:.6g}) '
+                                    f'disagree with amplitude {amplitude:g} at {phase:g} deg: '
+                                    'edit both or remove re and im')
+        value = stored
+    return value
+
+
+SCALES_AS_SPEED_SQUARED = ('N', 'N m')
+"""Reading units of load cells: their 1x grows as the speed squared (rigid rotor)."""
+SPEED_AGREES = 1e-3
+"""Relative speed difference under which coefficients are taken as they are."""
+
+
+def at_speed(calibration, record, speed):
+    """
+    Return (Calibration, note): the coefficients for readings at ``speed`` rad/s.
+
+    A record made at another speed is scaled as the speed squared when every sensor is a
+    load cell (N, N m), and said in ``note``; refused (ValueError) when a sensor's scaling
+    with speed is not known. No speed on either side: as they are, note ''.
+    """
+    recorded = (record or {}).get('speed')
+    if recorded is None or speed is None or abs(speed / recorded - 1.0) <= SPEED_AGREES:
+        return calibration, ''
+    units = list((record or {}).get('reading_units') or [])
+    unknown = [n for n, u in zip(calibration.sensors, units) if u not in SCALES_AS_SPEED_SQUARED]
+    if unknown or len(units) != len(calibration.sensors):
+        names = ', '.join(f"{n} ({u!r})" for n, u in zip(calibration.sensors, units)
+                          if u not in SCALES_AS_SPEED_SQUARED) or 'their units'
+        raise ValueError(f'the coefficients were made at {recorded:.4g} rad/s, the readings at '
+                         f'{speed:.4g} rad/s: how {names} scales with speed is not known (a load '
+                         'cell in N scales as the speed squared); calibrate at this speed')
+    factor = (speed / recorded) ** 2
+    scaled = replace(calibration, matrix=np.asarray(calibration.matrix) * factor,
+                     ci95=None if calibration.ci95 is None
+                     else np.asarray(calibration.ci95) * factor)
+    return scaled, (f'the coefficients, made at {recorded:.4g} rad/s, are scaled to the '
+                    f'readings\' {speed:.4g} rad/s as the speed squared (x{factor:.4g}; load '
+                    'cells of a rigid rotor)')

@@ -31,6 +31,9 @@ TOO_SMALL_CHANGE = 0.1
 """Readings by hand (no noise known): a change under 10 % of the readings is too small."""
 ILL_CONDITIONED = 100.0
 """Condition number of the coefficients above which the planes are nearly dependent."""
+SINGULAR = 1e-9
+"""Coefficients whose smallest singular value is under this share of the largest are
+singular: two planes act alike (to 1e-9) or one acts on no sensor."""
 
 
 @dataclass(frozen=True)
@@ -109,14 +112,11 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
     sensors = tuple(sensors) if sensors is not None else \
         tuple(f'sensor {k + 1}' for k in range(count))
     planes = tuple(dict.fromkeys(t.plane for t in trials))
-    weights_on = np.zeros((len(trials), len(planes)), complex)
     for k, trial in enumerate(trials):
         if not (trial.mass > 0.0 and trial.radius > 0.0):
             raise ValueError(f'trial run {k + 1} (plane {trial.plane}): the trial mass and '
                              'radius must be > 0')
-        if keep_trial and k > 0:
-            weights_on[k] = weights_on[k - 1]
-        weights_on[k, planes.index(trial.plane)] += trial.unbalance
+    weights_on = trial_weights_on(trials, planes, keep_trial)
     if np.linalg.matrix_rank(weights_on) < len(planes):
         raise ValueError('the trial runs cannot tell the planes apart (give each plane its '
                          'own trial run)')
@@ -134,8 +134,7 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
             cov = np.diag(sigma_b[:, s] ** 2) + sigma_a[s] ** 2
             variance = np.real(np.einsum('jk,kl,jl->j', pseudo, cov, pseudo.conj()))
             ci95[s] = np.sqrt(CHI2_2DOF_95 * np.maximum(variance, 0.0))
-    singular = np.linalg.svd(matrix, compute_uv=False)
-    condition = float(singular[0] / singular[-1]) if singular[-1] > 0.0 else math.inf
+    condition = checked_condition(matrix, 'the measured coefficients')
     checks = tuple(_check(k, trials[k], baseline, readings, keep_trial,
                           sigma_a if known else None, sigma_b if known else None)
                    for k in range(len(trials)))
@@ -147,6 +146,43 @@ def calibrate(baseline, trials, readings, sensors=None, keep_trial=False,
                         'and reading errors are amplified up to that many times in the '
                         'corrections')
     return Calibration(planes, sensors, matrix, ci95, condition, checks, tuple(warnings))
+
+
+def checked_condition(matrix, what='the coefficients'):
+    """
+    Return the 2-norm condition number of coefficients (sensors, planes); refuse singular.
+
+    Raises ValueError when there are fewer sensors than planes, or the planes' columns
+    are dependent (rank-deficient, to :data:`SINGULAR`): no correction follows.
+    """
+    matrix = np.asarray(matrix, complex)
+    sensors, planes = matrix.shape
+    if sensors < planes:
+        raise ValueError(f'{what}: {sensors} sensor{"s" if sensors > 1 else ""} for {planes} '
+                         'planes: rank-deficient, no correction follows (a sensor per plane '
+                         'at least)')
+    singular = np.linalg.svd(matrix, compute_uv=False)
+    if not singular[-1] > SINGULAR * singular[0]:
+        ratio = singular[0] / singular[-1] if singular[-1] > 0.0 else math.inf
+        raise ValueError(f'{what} are singular (condition number {ratio:.3g}): a plane acts '
+                         'on no sensor, or two planes act alike; no correction follows')
+    return float(singular[0] / singular[-1])
+
+
+def trial_weights_on(trials, planes, keep_trial=False):
+    """
+    Return the unbalance on per run and plane, (runs, planes) complex (kg m, or by hand).
+
+    Run k has its own trial on, or with ``keep_trial`` every trial up to it; a trial in
+    a plane not among ``planes`` adds nothing.
+    """
+    weights_on = np.zeros((len(trials), len(planes)), complex)
+    for k, trial in enumerate(trials):
+        if keep_trial and k > 0:
+            weights_on[k] = weights_on[k - 1]
+        if trial.plane in planes:
+            weights_on[k, planes.index(trial.plane)] += trial.unbalance
+    return weights_on
 
 
 def _check(k, trial, baseline, readings, keep_trial, sigma_a, sigma_b):

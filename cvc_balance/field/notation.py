@@ -60,12 +60,23 @@ def plane_name(text, what='plane'):
 
 
 def hand_trial(plane, text):
-    """Return the :class:`Trial` of a plane name and ``MASS@ANGLE_DEG`` (any mass unit)."""
+    """
+    Return the :class:`Trial` of a plane name and ``MASS@ANGLE_DEG`` (any mass unit).
+
+    ``MASS_KG@ANGLE_DEG,RADIUS_M`` gives the radius too: then kg and m.
+    """
+    radius = 1.0
+    if isinstance(text, str) and text.count(',') == 1:
+        text, radius_text = text.split(',')
+        radius = _number(radius_text.strip(), f'trial weight of plane {short(plane)}: radius',
+                         minimum=0.0)
+        if not radius > 0.0:
+            raise ValueError(f'trial weight of plane {short(plane)}: the radius must be > 0 m')
     mass, angle = polar_pair(text, f'trial weight of plane {short(plane)}')
     if not mass > 0.0:
         raise ValueError(f'trial weight of plane {short(plane)}: the mass must be > 0, '
                          f'got {short(text)}')
-    return Trial(plane_name(plane), mass, angle, 1.0)
+    return Trial(plane_name(plane), mass, angle, radius)
 
 
 def bag_trial(text):
@@ -74,15 +85,39 @@ def bag_trial(text):
     if not isinstance(text, str) or text.count(':') != 1 or text.count(',') != 1:
         raise ValueError(f'--trial: {form}, got {short(text)}')
     plane, rest = text.split(':')
-    weight, radius = rest.split(',')
-    trial = hand_trial(plane.strip(), weight.strip())
-    radius = _number(radius.strip(), f'--trial {short(text)}: radius', minimum=0.0)
-    if not radius > 0.0:
-        raise ValueError(f'--trial {short(text)}: the radius must be > 0 m')
-    return Trial(trial.plane, trial.mass, trial.angle, radius)
+    try:
+        return hand_trial(plane.strip(), rest.strip())
+    except ValueError as error:
+        raise ValueError(f'--trial {short(text)}: {error}') from None
 
 
 def polar_text(value, digits=4):
     """Return a complex value as people write it: ``AMPLITUDE@PHASE_DEG`` (0-360 deg)."""
     degrees = math.degrees(cmath.phase(value)) % 360.0
     return f'{abs(value):.{digits}g}@{degrees:.1f}'
+
+
+def weight_on(text):
+    """
+    Return (plane, ('angle', rad) or ('hole', n), mass kg) of ``PLANE:SITE:MASS_KG``.
+
+    SITE is the site's angle in degrees (I:15:0.2) or its hole number (I:#7:0.2): a weight
+    bolted on already.
+    """
+    form = 'give PLANE:SITE:MASS_KG, SITE an angle in degrees or #HOLE (I:15:0.2, I:#7:0.2)'
+    if not isinstance(text, str) or text.count(':') != 2:
+        raise ValueError(f'--weights-on: {form}, got {short(text)}')
+    plane, site, mass = (part.strip() for part in text.split(':'))
+    plane = plane_name(plane, f'--weights-on {short(text)}: plane')
+    mass = _number(mass, f'--weights-on {short(text)}: mass', minimum=0.0)
+    if not mass > 0.0:
+        raise ValueError(f'--weights-on {short(text)}: the mass must be > 0 kg')
+    if site.startswith('#'):
+        if not site[1:].isdigit() or not 1 <= int(site[1:]) <= 100_000:
+            raise ValueError(f'--weights-on {short(text)}: a hole is #1, #2, ...')
+        return plane, ('hole', int(site[1:])), mass
+    degrees = _number(site, f'--weights-on {short(text)}: site angle')
+    if abs(degrees) > MAX_DEGREES:
+        raise ValueError(f'--weights-on {short(text)}: the angle must be within '
+                         f'+-{MAX_DEGREES:g} deg')
+    return plane, ('angle', math.radians(degrees)), mass

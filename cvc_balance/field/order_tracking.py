@@ -78,34 +78,57 @@ def steady_window(time, angle, omega, speed=None, tolerance=DEFAULT_TOLERANCE):
     steady; the longest unbroken stretch of them is cut to whole revolutions. Raises
     ValueError when there is no such stretch of at least one revolution.
     """
+    return max(steady_stretches(time, angle, omega, speed, tolerance),
+               key=lambda w: (w.revolutions, w.end - w.start))
+
+
+def steady_stretches(time, angle, omega, speed=None, tolerance=DEFAULT_TOLERANCE):
+    """
+    Return every unbroken stretch at one steady speed, cut to whole revolutions, in order.
+
+    Arguments as :func:`steady_window`'s; stretches under one revolution are left out.
+    Raises ValueError when none is left.
+    """
     time, angle = np.asarray(time, float), np.asarray(angle, float)
     magnitude = np.abs(np.asarray(omega, float))
     if len(time) < 2:
         raise ValueError('fewer than two motion samples: no steady speed to read')
     if not tolerance > 0.0:
         raise ValueError(f'speed tolerance must be > 0, got {tolerance}')
-    target = _busiest_speed(time, magnitude, tolerance) if speed is None else abs(speed)
+    target = busiest_speed(time, magnitude, tolerance) if speed is None else abs(speed)
     if not target > 0.0:
         raise ValueError('the rotor does not turn in this run')
     steady = np.abs(magnitude - target) <= tolerance * target
-    start, stop = _longest_run(steady)
-    if stop - start < 2:
+    stretches, longest = [], 0.0
+    for start, stop in _runs(steady):
+        if stop - start < 2:
+            continue
+        window = _whole_turns(time[start:stop], angle[start:stop], magnitude[start:stop])
+        longest = max(longest, abs(angle[stop - 1] - angle[start]) / (2.0 * math.pi))
+        if window is not None:
+            stretches.append(window)
+    if stretches:
+        return stretches
+    if longest == 0.0:
         raise ValueError(f'no steady stretch at {target:.4g} rad/s (+-{tolerance:.1%}): the '
                          f'run spans {magnitude.min():.4g}-{magnitude.max():.4g} rad/s')
-    t, q = time[start:stop], angle[start:stop]
+    raise ValueError(f'the steady stretch at {target:.4g} rad/s turns {longest:.2f} '
+                     'revolutions: at least one whole revolution is needed')
+
+
+def _whole_turns(t, q, magnitude):
+    """Return the :class:`SteadyWindow` of a steady stretch cut to whole turns, or None."""
     turned = abs(q[-1] - q[0])
     revolutions = int(math.floor(turned / (2.0 * math.pi) + 1e-9))
     if revolutions < 1:
-        raise ValueError(f'the steady stretch at {target:.4g} rad/s turns {turned / 6.2832:.2f} '
-                         'revolutions: at least one whole revolution is needed')
+        return None
     direction = 1.0 if q[-1] >= q[0] else -1.0
     end_angle = q[0] + direction * 2.0 * math.pi * revolutions
     # The angle is monotonic over a steady stretch: the time of the last whole turn.
     end = float(np.interp(direction * end_angle, direction * q, t))
-    inside = magnitude[start:stop]
-    mean = float(np.mean(inside))
+    mean = float(np.mean(magnitude))
     return SteadyWindow(float(t[0]), end, mean, revolutions,
-                        float(np.max(np.abs(inside - mean)) / mean))
+                        float(np.max(np.abs(magnitude - mean)) / mean))
 
 
 def track(time, values, motion_time, motion_angle, window):
@@ -139,7 +162,7 @@ def track(time, values, motion_time, motion_angle, window):
     return Phasor(complex(a, -b), sigma, c, count)
 
 
-def _busiest_speed(time, magnitude, tolerance):
+def busiest_speed(time, magnitude, tolerance=DEFAULT_TOLERANCE):
     """Return the speed (rad/s) the rotor spent most time near (bands of ``tolerance``)."""
     dt = np.diff(time, append=time[-1])
     turning = magnitude > 1e-6 * max(float(magnitude.max()), 1e-300)
@@ -153,11 +176,7 @@ def _busiest_speed(time, magnitude, tolerance):
     return float(np.median(magnitude[turning][bands == busiest]))
 
 
-def _longest_run(mask):
-    """Return (start, stop) of the longest run of True in ``mask``."""
+def _runs(mask):
+    """Return (start, stop) of each run of True in ``mask``, in order."""
     edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    if not len(starts):
-        return 0, 0
-    longest = int(np.argmax(stops - starts))
-    return int(starts[longest]), int(stops[longest])
+    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist()))

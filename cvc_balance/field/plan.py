@@ -32,6 +32,8 @@ MIP_GAP = 1e-7
 """Relative optimality gap HiGHS closes before it stops."""
 TIME_LIMIT = 60.0
 """Seconds HiGHS may search; the best plan found so far is kept, its gap reported."""
+SAME_SITE = 1e-6
+"""A weight on already within this angle of a site (rad) sits at that site."""
 MAX_STACK_STATES = 200_000
 """Most partial sums the kit rounding enumerates (then it rounds greedily)."""
 
@@ -65,7 +67,7 @@ class Plan:
     :class:`~cvc_balance.field.correction.Residual` it leaves; ``status`` 'optimal',
     'time limit' (best found; ``gap`` its relative optimality gap), 'infeasible' (no
     plan meets the limits: no weights) or 'exact' (no search); ``note`` why a rule could
-    not be applied (else '').
+    not be applied (else ''); ``removed`` weights on already to take off (a trim).
     """
 
     name: str
@@ -76,11 +78,12 @@ class Plan:
     status: str = 'exact'
     gap: float = 0.0
     note: str = ''
+    removed: tuple = ()
 
     @property
     def count(self):
-        """Return the number of weights to bolt on."""
-        return sum(len(w.masses) for w in self.weights)
+        """Return the changes: weights to bolt on plus weights to take off."""
+        return sum(len(w.masses) for w in self.weights + self.removed)
 
 
 def continuous_plan(problem, correction):
@@ -190,19 +193,27 @@ def _greedy(mass, sites):
 
 
 def optimal_plan(problem, sites, objective='residual', max_weights=None, polygon=POLYGON,
-                 time_limit=TIME_LIMIT, mip_gap=MIP_GAP):
+                 time_limit=TIME_LIMIT, mip_gap=MIP_GAP, method='auto', existing=()):
     """
     Return the mixed-integer :class:`Plan` (see the module's description).
 
     ``sites``: {plane: WeightSites}; planes without sites take free continuous
     corrections. ``objective``: 'residual' or 'fewest' (needs the problem's limits).
+    ``method``: 'auto' (the smallest residual by :mod:`~cvc_balance.field.search` where it
+    applies, else HiGHS), 'search' (None when it does not apply) or 'milp' (HiGHS).
+    ``existing``: PlacedWeights on already (a trim): the plan may take them off, the
+    counts are changes (added and taken off) and a site's stack holds for the loading after.
     """
     if objective not in ('residual', 'fewest'):
         raise ValueError(f"objective must be 'residual' or 'fewest', got {objective!r}")
     if objective == 'fewest' and problem.limits is None:
         raise ValueError('the fewest weights need a limit on the residual (a grade, or '
                          'limits on the readings)')
-    model = _Model(problem, sites, polygon)
+    if objective == 'residual' and method in ('auto', 'search') and not existing:
+        found = _searched(problem, sites, max_weights, polygon)
+        if found is not None or method == 'search':
+            return found
+    model = _Model(problem, sites, polygon, existing)
     cap = () if max_weights is None else (model.count_at_most(max_weights),)
     if objective == 'residual':
         first = model.solve(model.residual_cost(), cap, time_limit, mip_gap)
@@ -226,38 +237,87 @@ def optimal_plan(problem, sites, objective='residual', max_weights=None, polygon
                       'optimal' if first.status == 0 and second.status == 0 else 'time limit')
 
 
+def _searched(problem, sites, max_weights, polygon):
+    """Return the smallest-residual Plan by pruned enumeration, or None where it does not go."""
+    from cvc_balance.field.correction import continuous_correction
+    from cvc_balance.field.search import search_plan
+
+    incumbent = None
+    if all(p in sites for p in problem.planes):
+        split = split_plan(problem, sites, continuous_correction(problem))
+        if max_weights is not None and split.count <= max_weights and not split.free:
+            incumbent = split.corrections
+    found = search_plan(problem, sites, max_weights, incumbent, polygon)
+    if found is None:
+        return None
+    counts, _ = found
+    return plan_of_counts(problem, sites, counts, 'optimal', 0.0)
+
+
+def plan_of_counts(problem, sites, counts, status, gap):
+    """Return the :class:`Plan` of {plane: {(angle, size): count}} at ``sites``."""
+    added = np.zeros(len(problem.planes), complex)
+    weights = []
+    for j, plane in enumerate(problem.planes):
+        stacks = {}
+        for (angle, size), count in counts.get(plane, {}).items():
+            stacks.setdefault(angle, []).extend([size] * count)
+        for angle, masses in sorted(stacks.items()):
+            weight = PlacedWeight(plane, angle % (2.0 * math.pi), sites[plane].radius,
+                                  tuple(sorted(masses, reverse=True)))
+            weights.append(weight)
+            added[j] += weight.unbalance
+    return Plan('optimal', tuple(weights), {}, added, problem.measure(added), status, gap)
+
+
 def _gap(result):
     gap = getattr(result, 'mip_gap', None)
     return float(gap) if gap is not None and math.isfinite(gap) else 0.0
 
 
 class _Model:
-    """The plan's variables and constraints: counts n, free corrections (x, y), and t."""
+    """
+    The plan's variables and constraints: counts n, free corrections (x, y), and t.
 
-    def __init__(self, problem, sites, polygon):
+    Each slot is (plane index, WeightSites, angle, size, sign): +1 weights to add (0 to
+    ``stack``), -1 weights on already that may be taken off (0 to how many are on).
+    """
+
+    def __init__(self, problem, sites, polygon, existing=()):
         self.problem, self.sites = problem, sites
         channels, planes = problem.influence.shape
-        self.slots = []                       # (plane index, WeightSites, angle, size)
-        effects = []
+        self.slots = []
+        upper_of = []
         self.free = []                        # plane indexes without sites
-        site_slots = []                       # (slot indexes of one site, its stack limit)
+        site_rows = {}                        # (plane, angle): [(slot, sign)], limit
+        on = {}
+        for weight in existing:
+            key = (weight.plane, _site_angle(sites, weight))
+            for mass in weight.masses:
+                on[key + (mass,)] = on.get(key + (mass,), 0) + 1
         for j, plane in enumerate(problem.planes):
             plane_sites = sites.get(plane)
             if plane_sites is None:
                 self.free.append(j)
                 continue
             for angle in plane_sites.angles:
-                first = len(self.slots)
+                here = {m: c for (p, a, m), c in on.items() if p == plane and a == angle}
+                rows = []
                 for size in plane_sites.masses:
-                    self.slots.append((j, plane_sites, angle, size))
-                    effects.append(size * plane_sites.radius * complex(math.cos(angle),
-                                                                       math.sin(angle)))
-                site_slots.append((range(first, len(self.slots)), plane_sites.stack))
+                    rows.append((len(self.slots), 1.0))
+                    self.slots.append((j, plane_sites, angle, size, 1))
+                    upper_of.append(plane_sites.stack)
+                for size, count in sorted(here.items()):
+                    rows.append((len(self.slots), -1.0))
+                    self.slots.append((j, plane_sites, angle, size, -1))
+                    upper_of.append(count)
+                site_rows[(j, angle)] = (rows, plane_sites.stack - sum(here.values()))
         slots, free = len(self.slots), len(self.free)
         # Columns: the reading change per variable (complex), channels x variables.
         columns = np.zeros((channels, slots + 2 * free), complex)
-        for v, (j, _, _, _) in enumerate(self.slots):
-            columns[:, v] = problem.influence[:, j] * effects[v]
+        for v, (j, plane_sites, angle, size, sign) in enumerate(self.slots):
+            columns[:, v] = problem.influence[:, j] * sign * size * plane_sites.radius \
+                * complex(math.cos(angle), math.sin(angle))
         for f, j in enumerate(self.free):
             columns[:, slots + 2 * f] = problem.influence[:, j]
             columns[:, slots + 2 * f + 1] = 1j * problem.influence[:, j]
@@ -278,16 +338,17 @@ class _Model:
         rows[:, slots + 2 * free:] = -np.kron(np.eye(channels), np.ones((polygon, 1)))
         base = (w[:, None] * self.turns[None, :] * problem.baseline[:, None]).real / scale
         self.residual_rows = LinearConstraint(rows, -np.inf, -base.reshape(-1))
-        stacks = np.zeros((len(site_slots), self.size))
-        for row, (indexes, _) in enumerate(site_slots):
-            stacks[row, indexes.start:indexes.stop] = 1.0
-        self.stack_rows = LinearConstraint(stacks, -np.inf,
-                                           np.array([limit for _, limit in site_slots], float)) \
-            if site_slots else None
+        # A site holds at most ``stack`` weights after: added - taken off <= stack - on.
+        stacks = np.zeros((len(site_rows), self.size))
+        limits = np.zeros(len(site_rows))
+        for row, (entries, limit) in enumerate(site_rows.values()):
+            for v, sign in entries:
+                stacks[row, v] = sign
+            limits[row] = limit
+        self.stack_rows = LinearConstraint(stacks, -np.inf, limits) if site_rows else None
         upper = np.full(self.size, np.inf)
         lower = np.full(self.size, -np.inf)
-        for v, (_, plane_sites, _, _) in enumerate(self.slots):
-            lower[v], upper[v] = 0.0, plane_sites.stack
+        lower[:slots], upper[:slots] = 0.0, upper_of
         lower[slots + 2 * free:] = 0.0
         self.bounds = Bounds(lower, upper)
         self.integrality = np.zeros(self.size)
@@ -342,21 +403,50 @@ class _Model:
         counts = np.round(x[:self.slot_count]).astype(int)
         problem = self.problem
         added = np.zeros(len(problem.planes), complex)
-        stacks = {}
-        for v, (j, plane_sites, angle, size) in enumerate(self.slots):
+        stacks = {1: {}, -1: {}}
+        for v, (j, plane_sites, angle, size, sign) in enumerate(self.slots):
             if counts[v] > 0:
-                stacks.setdefault((j, angle), []).extend([size] * int(counts[v]))
-        weights = []
-        for (j, angle), masses in sorted(stacks.items()):
-            plane_sites = self.sites[problem.planes[j]]
-            weight = PlacedWeight(problem.planes[j], angle % (2.0 * math.pi),
-                                  plane_sites.radius, tuple(sorted(masses, reverse=True)))
-            weights.append(weight)
-            added[j] += weight.unbalance
+                stacks[sign].setdefault((j, angle), []).extend([size] * int(counts[v]))
+        placed = {1: [], -1: []}
+        for sign, groups in stacks.items():
+            for (j, angle), masses in sorted(groups.items()):
+                plane_sites = self.sites[problem.planes[j]]
+                weight = PlacedWeight(problem.planes[j], angle % (2.0 * math.pi),
+                                      plane_sites.radius, tuple(sorted(masses, reverse=True)))
+                placed[sign].append(weight)
+                added[j] += sign * weight.unbalance
         free = {}
         for f, j in enumerate(self.free):
             value = complex(x[self.slot_count + 2 * f], x[self.slot_count + 2 * f + 1])
             free[problem.planes[j]] = value
             added[j] += value
-        return Plan('optimal', tuple(weights), free, added, problem.measure(added), status,
-                    gap)
+        return Plan('optimal', tuple(placed[1]), free, added, problem.measure(added), status,
+                    gap, removed=tuple(placed[-1]))
+
+
+def _site_angle(sites, weight):
+    """Return the site angle (as the sites hold it) a weight on already sits at."""
+    plane_sites = sites.get(weight.plane)
+    if plane_sites is not None:
+        for angle in plane_sites.angles:
+            if abs(math.remainder(angle - weight.angle, 2.0 * math.pi)) < SAME_SITE:
+                return angle
+    raise ValueError(f'a weight on already at {math.degrees(weight.angle):g} deg in plane '
+                     f'{weight.plane}: no site there')
+
+
+def final_loading(existing, plan):
+    """Return the loading after a plan: what is on, less what it takes off, plus what it adds."""
+    loads = {}
+    for weight in existing:
+        loads.setdefault((weight.plane, round(weight.angle % (2 * math.pi), 9)),
+                         [weight.radius, []])[1].extend(weight.masses)
+    for weight in plan.removed:
+        masses = loads[(weight.plane, round(weight.angle % (2 * math.pi), 9))][1]
+        for mass in weight.masses:
+            masses.remove(next(m for m in masses if abs(m - mass) < 1e-12))
+    for weight in plan.weights:
+        loads.setdefault((weight.plane, round(weight.angle % (2 * math.pi), 9)),
+                         [weight.radius, []])[1].extend(weight.masses)
+    return tuple(PlacedWeight(plane, angle, radius, tuple(sorted(masses, reverse=True)))
+                 for (plane, angle), (radius, masses) in sorted(loads.items()) if masses)

@@ -9,7 +9,7 @@ component and the field that is wrong. Lengths m, masses kg, angles rad
 No file I/O: :mod:`cvc_balance.physics.layout_file` reads files and text.
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import cached_property
 import hashlib
 import json
@@ -42,6 +42,10 @@ MAX_NAME = 200
 """Longest name of a layout, component or support, characters."""
 SITE_PLANES = ('I', 'II')
 """Names of the correction planes that ``balancing.sites`` may give weight sites for."""
+ROTATIONS = ('positive', 'negative')
+"""balancing.sites.rotation: the sense of omega (positive: rotor X toward rotor Y)."""
+NUMBERINGS = ('with_rotation', 'against_rotation')
+"""balancing.sites.<plane>.numbering: which way the hole numbers run."""
 MAX_SITES = 720
 """Most weight sites per plane (threaded holes every half degree)."""
 MAX_WEIGHT_SIZES = 20
@@ -115,7 +119,11 @@ class WeightSites:
     ``plane`` 'I' or 'II'; ``angles`` rad (rotor frame, from rotor X toward rotor Y) of
     the threaded holes or weight-stack sites; ``radius`` m of the weights' centres of
     mass; ``masses`` kg, the weight sizes the kit has (ascending), any number of each;
-    ``stack`` how many weights may go on one site.
+    ``stack`` how many weights may go on one site. ``first_hole`` rad: the site numbered 1
+    (the reference mark), and ``numbering`` 'with_rotation' or 'against_rotation': which
+    way the numbers run (None: the sites are not numbered); ``rotation`` 'positive' (the
+    rotor turns from rotor X toward rotor Y, omega > 0) or 'negative' (``sites.rotation``,
+    None when not said).
     """
 
     plane: str
@@ -123,6 +131,9 @@ class WeightSites:
     radius: float
     masses: tuple
     stack: int = 1
+    first_hole: float = None
+    numbering: str = None
+    rotation: str = None
 
 
 @dataclass(frozen=True)
@@ -216,6 +227,11 @@ class Layout:
         balancing = asdict(self.balancing)
         if not self.balancing.sites:
             del balancing['sites']
+        # Fields added later appear only when given: older layouts keep their digests.
+        for plane_sites in balancing.get('sites', ()):
+            for key in ('first_hole', 'numbering', 'rotation'):
+                if plane_sites[key] is None:
+                    del plane_sites[key]
         fast = getattr(self.components, 'canonical_json', None)   # a ComponentTable's own
         parts = {'balancing': dumps(balancing), 'description': dumps(self.description),
                  'gravity': dumps(self.gravity), 'name': dumps(self.name),
@@ -567,14 +583,25 @@ def _balancing(spec):
 def _sites(spec):
     where = 'layout: field balancing.sites'
     _mapping(spec, where)
-    _known_keys(spec, SITE_PLANES, where)
-    return tuple(_plane_sites(spec[plane], plane) for plane in SITE_PLANES if plane in spec)
+    _known_keys(spec, SITE_PLANES + ('rotation',), where)
+    rotation = spec.get('rotation')
+    if rotation not in (None,) + ROTATIONS:
+        raise LayoutError(f'{where}.rotation must be one of {", ".join(ROTATIONS)}, got '
+                          f'{short(rotation)}')
+    sites = tuple(replace(_plane_sites(spec[plane], plane), rotation=rotation)
+                  for plane in SITE_PLANES if plane in spec)
+    numbered = [s.plane for s in sites if s.numbering is not None]
+    if numbered and rotation is None:
+        raise LayoutError(f'{where}.{numbered[0]}.numbering counts with or against the '
+                          f'rotation: give {where}.rotation (positive: rotor X toward rotor Y)')
+    return sites
 
 
 def _plane_sites(spec, plane):
     where = f'layout: field balancing.sites.{plane}'
     _mapping(spec, where)
-    _known_keys(spec, ('angles', 'angles_deg', 'radius', 'masses', 'stack'), where)
+    _known_keys(spec, ('angles', 'angles_deg', 'radius', 'masses', 'stack',
+                       'first_hole_angle_deg', 'numbering'), where)
     if ('angles' in spec) == ('angles_deg' in spec):
         raise LayoutError(f'{where}: give exactly one of fields angles (rad) and angles_deg')
     key = 'angles' if 'angles' in spec else 'angles_deg'
@@ -599,7 +626,23 @@ def _plane_sites(spec, plane):
     if isinstance(stack, bool) or not isinstance(stack, int) or not 1 <= stack <= MAX_STACK:
         raise LayoutError(f'{where}.stack must be a whole number from 1 to {MAX_STACK}, '
                           f'got {short(stack)}')
-    return WeightSites(plane, tuple(angles), radius, tuple(masses), stack)
+    first_hole = numbering = None
+    if ('first_hole_angle_deg' in spec) != ('numbering' in spec):
+        raise LayoutError(f'{where}: give both first_hole_angle_deg and numbering, or neither')
+    if 'numbering' in spec:
+        numbering = spec['numbering']
+        if numbering not in NUMBERINGS:
+            raise LayoutError(f'{where}.numbering must be one of {", ".join(NUMBERINGS)}, got '
+                              f'{short(numbering)}')
+        first = radians(_number(spec['first_hole_angle_deg'], f'{where}.first_hole_angle_deg',
+                                bound=math.degrees(MAX_ANGLE)))
+        first_hole = next((a for a in angles if abs(math.remainder(a - first, 2.0 * math.pi))
+                           < 1e-9), None)
+        if first_hole is None:
+            raise LayoutError(f'{where}.first_hole_angle_deg: no site at '
+                              f'{math.degrees(first):g} deg (hole 1 is one of the sites)')
+    return WeightSites(plane, tuple(angles), radius, tuple(masses), stack, first_hole,
+                       numbering)
 
 
 def _bounded_list(value, where, limit):

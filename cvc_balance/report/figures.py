@@ -63,7 +63,8 @@ def plane_figure(summary, plane_index, path):
             tip += step
             reach.append(abs(tip))
         if after is not None:
-            _arrow(axes, 0j, after, AFTER, f'after {abs(after):,.0f} g mm', 2.4, drawn)
+            worse = '' if plan['name'] == summary['recommended'] else ' (worse: not recommended)'
+            _arrow(axes, 0j, after, AFTER, f'after {abs(after):,.0f} g mm{worse}', 2.4, drawn)
         measured = summary.get('measured_after')
         if measured is not None:
             value = _vector(measured['planes'][k])
@@ -101,7 +102,8 @@ def plane_figure(summary, plane_index, path):
                       va='center', fontsize=9, weight='bold',
                       bbox={'boxstyle': 'round,pad=0.2', 'fc': 'white', 'ec': WEIGHT})
         drawn.append(theta)
-    axes.plot([], [], 'o', color=WEIGHT, mec='black', label=f'weights ({plan["name"]} plan)')
+    axes.plot([], [], 'o', color=WEIGHT, mec='black',
+              label=f'weights ({_plan_label(summary, plan)})')
     axes.set_ylim(0.0, ring * 1.02)
     # The radial scale where nothing is drawn: the candidate angle farthest from it all.
     candidates = np.radians(np.arange(22.5, 360.0, 45.0))
@@ -168,7 +170,7 @@ def readings_figure(summary, path):
     y = np.arange(len(names))[::-1]
     axes.barh(y + 0.18, [before[n] for n in names], 0.36, color=BEFORE, label='run (1x)')
     axes.barh(y - 0.18, after, 0.36, color=AFTER,
-              label=f"predicted after the {plan['name']} plan")
+              label=f"predicted after the {_plan_label(summary, plan)}")
     units = {r['channel']: r['unit'] for r in summary['readings']}
     axes.set_yticks(y, [f'{n} [{units[n]}]' for n in names], fontsize=8.5)
     axes.set_xlabel('1x amplitude (each sensor in its unit)')
@@ -178,4 +180,12 @@ def readings_figure(summary, path):
 
 
 def _recommended(summary):
-    return next(p for p in summary['plans'] if p['name'] == summary['recommended'])
+    """Return the plan drawn: the recommended one, else the continuous (shown as worse)."""
+    return next((p for p in summary['plans'] if p['name'] == summary['recommended']),
+                summary['plans'][0])
+
+
+def _plan_label(summary, plan):
+    if plan['name'] == summary['recommended']:
+        return f"{plan['name']} plan"
+    return f"{plan['name']} plan, NOT recommended: worse than now"

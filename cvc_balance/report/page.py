@@ -50,6 +50,39 @@ def _table(header, rows, text_columns=1, css=''):
     return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
 
 
+def _hole(weight):
+    """Return the hole as people count it ('7: 90 deg from the mark ...'), or '-'."""
+    if not weight.get('hole'):
+        return '-'
+    return weight['hole_text'].removeprefix('hole ').replace(', ', ': ', 1)
+
+
+def _segment_row(segment, used):
+    layout = segment['layout']
+    steady = segment['steady']
+    grade = segment.get('grade')
+    return (segment['number'], f"{segment['from']:.3f}-{segment['to']:.3f}",
+            f"{layout['name']} ({layout['digest']})" if layout else 'none',
+            f"{steady['window'][0]:.3f}-{steady['window'][1]:.3f}" if steady
+            else segment['note'] or '-',
+            f"{steady['speed']:.4g}" if steady else '-',
+            steady['revolutions'] if steady else '-',
+            f"G {grade['equivalent_grade']:.2f}" if grade else '-',
+            'yes' if segment['number'] == used else '')
+
+
+def _check_html(check):
+    if not check['checked']:
+        return f'<p>Not checked: {escape(check["note"])}</p>'
+    rows = [(p['plane'], f"{p['factor']:.3g}", f"{p['phase_deg']:+.0f}",
+             'yes' if p['agrees'] else 'NO') for p in check['planes']]
+    said = ('The measured coefficients are what the layout\'s physics predicts for load cells '
+            'on a rigid rotor (within a factor 3 and 45 deg).' if check['agrees'] else
+            escape(check['message']))
+    return (_table(('plane', 'measured / predicted', 'phase [deg]', 'agrees'), rows)
+            + f'<p>{said}</p>')
+
+
 def page(summary, figures, generated=None):
     """
     Return the report's HTML text.
@@ -59,20 +92,27 @@ def page(summary, figures, generated=None):
     """
     generated = generated or datetime.datetime.now(datetime.timezone.utc)
     run, grade = summary['run'], summary['grade']
-    plan = next(p for p in summary['plans'] if p['name'] == summary['recommended'])
+    plan = next((p for p in summary['plans'] if p['name'] == summary['recommended']), None)
     layout = run['layout']
-    title = f"Field balancing report: {layout['name'] if layout else run['bag']}"
+    by_hand = run['bag'] is None
+    title = f"Field balancing report: {layout['name'] if layout else run['bag'] or 'readings'}"
+    source = 'readings by hand' if by_hand else \
+        f'run {escape(run["bag"])}, recorded {escape(run["date"])}'
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
              f'<title>{escape(title)}</title><style>{STYLE}</style></head><body>',
              f'<h1>{escape(title)}</h1>',
-             f'<p class="small">run {escape(run["bag"])}, recorded {escape(run["date"])}; '
+             f'<p class="small">{source}; '
              f'layout {escape(layout["name"]) if layout else "none"} '
              f'(digest {escape(layout["digest"]) if layout else "-"})</p>']
     if grade is not None:
-        after = plan['after']['equivalent_grade'] if plan['after'] else None
-        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade']),
-                 _grade_box(f'after the {plan["name"]} plan (predicted)', after,
-                            grade['grade'])]
+        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade'])]
+        if plan is None:
+            boxes.append('<div class="out">after<b>no plan</b>every plan would leave the '
+                         'rotor worse</div>')
+        else:
+            after = plan['after']['equivalent_grade'] if plan['after'] else None
+            boxes.append(_grade_box(f'after the {plan["name"]} plan (predicted)', after,
+                                    grade['grade']))
         measured = summary.get('measured_after')
         if measured is not None:
             boxes.append(_grade_box('measured after', measured['equivalent_grade'],
@@ -85,12 +125,25 @@ def page(summary, figures, generated=None):
         parts.append('<div class="verdict" id="verdict">'
                      + _grade_box('grade', None, 0.0) + '</div>')
     parts.append('<h2 id="bolt">What to bolt where</h2>')
-    if plan['weights']:
-        rows = [(w['plane'], _deg(w['angle_deg']), f"{w['radius']:.3f}",
+    if plan is None:
+        parts.append('<p id="no-plan"><b>Nothing: no plan is recommended.</b> Every plan '
+                     'would leave the rotor worse than it is now (see the warnings); check '
+                     'the coefficients and the trial runs.</p>')
+    elif plan['weights'] or plan.get('removed'):
+        trim = bool(summary.get('weights_on'))
+        rows = [(w['plane'], _deg(w['angle_deg']), _hole(w), f"{w['radius']:.3f}",
                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
-                for w in plan['weights']]
-        parts.append(_table(('plane', 'site angle [deg]', 'radius [m]', 'weights',
-                             'total [g]'), rows, 1, 'bolt'))
+                + ((action,) if trim else ())
+                for action, key in (('add', 'weights'), ('take off', 'removed'))
+                for w in plan.get(key, ())]
+        parts.append(_table(('plane', 'site angle [deg]', 'hole', 'radius [m]', 'weights',
+                             'total [g]') + (('do',) if trim else ()), rows, 1, 'bolt'))
+        if trim:
+            parts.append('<h2 id="loading">Loading after, per site</h2>' + _table(
+                ('plane', 'site angle [deg]', 'hole', 'weights', 'total [g]'),
+                [(w['plane'], _deg(w['angle_deg']), _hole(w),
+                  ' + '.join(f'{m * 1000:g} g' for m in w['masses']), f"{w['mass'] * 1000:g}")
+                 for w in plan['final']], 1))
         if plan['name'] == 'split':
             how = 'the vector split of the continuous correction, rounded to the kit'
         elif summary['objective'] == 'fewest':
@@ -98,7 +151,7 @@ def page(summary, figures, generated=None):
                 f'{plan["status"]})'
         else:
             how = f'the smallest residual with at most {summary["max_weights"]} weights ' \
-                f'(mixed-integer plan, HiGHS: {plan["status"]})'
+                f'(proven by enumeration or HiGHS: {plan["status"]})'
         parts.append(f'<p>{plan["count"]} weights: {escape(how)}. Angles in the rotor frame, '
                      'from rotor X toward rotor Y; radius of the weights\' centres.</p>')
     else:
@@ -135,14 +188,21 @@ def page(summary, figures, generated=None):
         rows = [(q['plane'], f"{q['z']:+.3f}", f"{q['g_mm']:.0f}", _deg(q['angle_deg']),
                  f"{q['ci95_g_mm']:.0f}" if q.get('ci95_g_mm') is not None else '-',
                  f"{q['permissible_g_mm']:.0f}") for q in grade['before']['planes']]
-        parts.append('<h2>Unbalance before (identified from the load cells)</h2>'
+        origin = escape(grade.get('source', 'the load cells'))
+        parts.append(f'<h2>Unbalance before (from {origin})</h2>'
                      + _table(('plane', 'z [m]', 'U [g mm]', 'angle [deg]', '95 % [g mm]',
                                'allowed [g mm]'), rows))
-    rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
-            ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
-            ('steady speed', f"{run['speed']:.5g} rad/s (spread {run['speed_spread']:.2%})"),
-            ('read over', f"{run['revolutions']} whole revolutions, {run['window'][0]:.3f}-"
-                          f"{run['window'][1]:.3f} s")]
+    if by_hand:
+        rows = [('readings', 'by hand'),
+                ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+                ('speed', f"{run['speed']:.5g} rad/s" if run['speed'] else 'not given')]
+    else:
+        rows = [('bag', run['bag']), ('recorded (first message, UTC)', run['date']),
+                ('layout', f"{layout['name']} ({layout['digest']})" if layout else 'none'),
+                ('steady speed', f"{run['speed']:.5g} rad/s (spread "
+                                 f"{run['speed_spread']:.2%})"),
+                ('read over', f"{run['revolutions']} whole revolutions, "
+                              f"{run['window'][0]:.3f}-{run['window'][1]:.3f} s")]
     measured = summary.get('measured_after')
     if measured is not None:
         rows.append(('check run after', f"{measured['bag']} ({measured['date']}): G "
@@ -150,9 +210,18 @@ def page(summary, figures, generated=None):
                          f"plane {q['plane']} {q['g_mm']:.0f} g mm" for q in
                          measured['planes'])))
     parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
+    segments = summary.get('segments') or []
+    if segments:
+        parts.append('<h2 id="segments">Layout segments of the run</h2>' + _table(
+            ('segment', 'from-to [s]', 'layout', 'steady stretch [s]', 'speed [rad/s]',
+             'revolutions', 'load cells', 'read'),
+            [_segment_row(s, run.get('segment')) for s in segments], 3))
+        parts.append('<p class="small">A run is read inside one layout segment, never across '
+                     'a layout change (--segment N to choose).</p>')
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
-                          _deg(r['phase_deg']), f"{r['sigma']:.2g}")
+                          _deg(r['phase_deg']),
+                          '-' if r['sigma'] is None else f"{r['sigma']:.2g}")
                          for r in summary['readings']], 2))
     coefficients = summary['coefficients']
     if coefficients is not None:
@@ -165,6 +234,10 @@ def page(summary, figures, generated=None):
                      f'{"inf" if condition is None else f"{condition:.3g}"}; from '
                      + ', '.join(escape(f"{r['role']}: {r['bag']}")
                                  for r in coefficients['runs']) + '.</p>')
+        check = summary.get('model_check')
+        if check is not None:
+            parts.append('<h2 id="physics">Coefficients against the layout\'s physics</h2>'
+                         + _check_html(check))
     parts.append(f'<p class="small">cvc-balance report, generated '
                  f'{escape(generated.isoformat(timespec="seconds"))}.</p></body></html>')
     return '\n'.join(parts)
