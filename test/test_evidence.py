@@ -348,3 +348,30 @@ def test_the_node_and_play_lead_with_the_measured_verdict(bags, tmp_path):
                                '23.27 rad/s: WITHIN G 6.3')
     log = (tmp_path / 'node.log').read_text()
     assert '[ERROR]' in log and 'balance ERROR: G ' in log
+
+
+def test_the_field_report_leads_with_the_measured_grade(bags, tmp_path):
+    """The report's top: the measured grade, labelled; the layout's; the difference."""
+    from html.parser import HTMLParser
+
+    class Text(HTMLParser):
+        def __init__(self):
+            super().__init__()
+            self.parts = []
+
+        def handle_data(self, data):
+            self.parts.append(data)
+    out = tmp_path / 'report'
+    cli('report', bags['differs'], '-o', out)
+    html = Text()
+    html.feed((out / 'report.html').read_text(encoding='utf-8'))
+    text = ' '.join(' '.join(html.parts).split())
+    summary = json.loads(cli('correct', bags['differs'], '--json').stdout)
+    before = summary['grade']['before']['equivalent_grade']
+    assert f'before, measured by the load cells G {before:.2f} OUT OF G 6.3' in text
+    declared = grade_by_hand(by_hand(DECLARED))
+    assert f'the layout expects OK: G {declared:.2g} at the service speed 23.27 rad/s: ' \
+        'WITHIN G 6.3' in text
+    assert 'the rotor is not what its layout says: plane II +' in text
+    true = grade_by_hand(by_hand(with_extra(DECLARED, EXTRA)))
+    assert before == pytest.approx(true, rel=0.05)

@@ -685,6 +685,42 @@ def _readings(run):
             for n, p in run.phasors.items()]
 
 
+def layout_expects(layout, grade):
+    """
+    Return what the layout expects beside the measured grade: the verdict of record's rule.
+
+    {'layout_expects': {level, verdict, equivalent_grade, text} or None, 'disagreement':
+    'the rotor is not what its layout says: ...' or None}: the layout's own verdict at the
+    grade's speed, and where the measured unbalance differs from the layout's beyond its
+    95 % radius and the residual share (:func:`cvc_balance.identify.evidence.disagreeing`).
+    """
+    if layout is None or layout.correction_planes() is None:
+        return {'layout_expects': None, 'disagreement': None}
+    from cvc_balance.identify.evidence import disagreeing, disagreement_text, explain
+    from cvc_balance.identify.estimate import layout_unbalance, residual, unbalance_from
+    from cvc_balance.physics.assessment import judge_balance
+    from cvc_balance.physics.engine import RotorModel
+    model = RotorModel.from_layout(layout)
+    verdict = judge_balance(model, top_speed=grade.speed, grade=grade.grade)
+    declared = layout_unbalance(model)
+    rows = [(label, z, complex(u) - v.value, ci, allowed) for label, z, u, ci, allowed, (_, v)
+            in zip(grade.planes, grade.z, grade.before, grade.ci95, grade.permissible,
+                   declared.planes)]
+    found = disagreeing(rows)
+    # The measured rotor as aggregates (S, P about O) from its two planes' unbalance.
+    z_i, z_ii = grade.z
+    static = complex(grade.before[0] + grade.before[1])
+    products = complex(z_i * grade.before[0] + z_ii * grade.before[1])
+    diff = residual(unbalance_from(model, static, products), declared)
+    expects = None if verdict.assessment is None else {
+        'level': verdict.level, 'verdict': verdict.words,
+        'equivalent_grade': verdict.assessment.equivalent_grade,
+        'text': f'the layout expects {verdict.level}: {verdict.text}'}
+    return {'layout_expects': expects,
+            'disagreement': disagreement_text(found, explain(model, diff) if found else None)
+            or None}
+
+
 def summarise(result, record=None):
     """Return a FieldCorrection as JSON-able data (schema in the README)."""
     import numpy as np
@@ -725,7 +761,8 @@ def summarise(result, record=None):
             'before': {'equivalent_grade': before, 'within_grade': before <= grade.grade,
                        'planes': [_plane_vector(p, z, u, ci, per) for p, z, u, ci, per in
                                   zip(grade.planes, grade.z, grade.before, grade.ci95,
-                                      grade.permissible)]}}
+                                      grade.permissible)]},
+            **layout_expects(getattr(run, 'layout', None), grade)}
     unchanged = problem.measure(np.zeros(len(problem.planes), complex))
     summary['before'] = {'residual': _residual(problem, unchanged)}
     for plan in result.plans:

@@ -134,11 +134,7 @@ class VerdictOfRecord:
     @property
     def disagreement_text(self):
         """Return 'the rotor is not what its layout says: ...', or '' when they agree."""
-        if not self.disagreements:
-            return ''
-        text = 'the rotor is not what its layout says: ' + ', '.join(
-            d.describe() for d in self.disagreements)
-        return text + (f'; {self.explanation}' if self.explanation else '')
+        return disagreement_text(self.disagreements, self.explanation)
 
     @property
     def statement(self):
@@ -235,15 +231,35 @@ def verdict_of_record(model, estimate=None, top_speed=0.0, grade=None,
         reason = (f"the load cells' 95 % interval is too wide yet ({where}: "
                   f'{g_mm(ci):.0f} g mm against its permissible {g_mm(allowed):.0f} g mm)')
         return VerdictOfRecord(layout.level, LAYOUT, layout, measured, reason=reason)
-    disagreements = tuple(
-        Disagreement(label, z, value, ci, allowed) for label, z, value, ci, allowed in limits
-        if abs(value) > ci and abs(value) > residual_warn * allowed)
+    disagreements = disagreeing(limits, residual_warn)
     level = measured.level
     if disagreements and LEVEL_ORDER[level] < LEVEL_ORDER[assessment.WARN]:
         level = assessment.WARN
     explanation = explain(model, diff) if disagreements else None
     return VerdictOfRecord(level, MEASURED, layout, measured, None, disagreements,
                            explanation)
+
+
+def disagreeing(rows, residual_warn=RESIDUAL_WARN):
+    """
+    Return the :class:`Disagreement` of each row where rotor and layout differ (the rule).
+
+    ``rows``: (plane label, z m, residual complex kg m, its 95 % radius kg m, permissible
+    share kg m). A residual differs when it is beyond its 95 % radius AND beyond
+    ``residual_warn`` of the share (see :data:`RESIDUAL_WARN`).
+    """
+    return tuple(Disagreement(label, z, value, ci, allowed)
+                 for label, z, value, ci, allowed in rows
+                 if abs(value) > ci and abs(value) > residual_warn * allowed)
+
+
+def disagreement_text(disagreements, explanation=None):
+    """Return 'the rotor is not what its layout says: ...' ('' for none), one line."""
+    if not disagreements:
+        return ''
+    text = 'the rotor is not what its layout says: ' + ', '.join(
+        d.describe() for d in disagreements)
+    return text + (f'; {explanation}' if explanation else '')
 
 
 def _limits(found, diff, judged):
@@ -374,5 +390,6 @@ def worst(levels):
     return max(levels, key=LEVEL_ORDER.__getitem__)
 
 
-__all__ = ['CANNOT_TELL', 'Disagreement', 'explain', 'LAYOUT', 'MEASURED', 'NO_CELLS',
+__all__ = ['CANNOT_TELL', 'Disagreement', 'disagreeing', 'disagreement_text', 'explain',
+           'LAYOUT', 'MEASURED', 'NO_CELLS',
            'RESIDUAL_WARN', 'verdict_of_record', 'VerdictOfRecord', 'worst']

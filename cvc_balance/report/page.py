@@ -105,7 +105,9 @@ def page(summary, figures, generated=None):
              f'layout {escape(layout["name"]) if layout else "none"} '
              f'(digest {escape(layout["digest"]) if layout else "-"})</p>']
     if grade is not None:
-        boxes = [_grade_box('before', grade['before']['equivalent_grade'], grade['grade'])]
+        # The verdict of record: what the machine measures, labelled; the layout's beside.
+        boxes = [_grade_box(f"before, measured by {grade.get('source', 'the load cells')}",
+                            grade['before']['equivalent_grade'], grade['grade'])]
         if plan is None:
             boxes.append('<div class="out">after<b>no plan</b>every plan would leave the '
                          'rotor worse</div>')
@@ -118,6 +120,12 @@ def page(summary, figures, generated=None):
             boxes.append(_grade_box('measured after', measured['equivalent_grade'],
                                     grade['grade']))
         parts.append('<div class="verdict" id="verdict">' + ''.join(boxes) + '</div>')
+        if grade.get('layout_expects'):
+            parts.append(f'<p id="layout-expects">{escape(grade["layout_expects"]["text"])}'
+                         '</p>')
+        if grade.get('disagreement'):
+            parts.append(f'<p class="warning" id="disagreement"><b>'
+                         f'{escape(grade["disagreement"])}</b></p>')
         parts.append(f'<p>ISO 21940-11 grade G {grade["grade"]:g} at '
                      f'{grade["speed"]:.4g} rad/s ({grade["speed"] * 30 / 3.141592653589793:.0f} '
                      f'rpm), rotor {grade["mass"]:.1f} kg.</p>')
