@@ -4,13 +4,14 @@ Which machine a bag was recorded on: its ``machine_id``, written into the bag an
 Written by ``cvc-balance simulate --machine-id``, ``cvc-balance record --machine-id`` and
 the node's ``machine_id`` parameter through :func:`cvc_balance.bag.rosbag2.open_writer`'s
 ``custom_data``: an MCAP Metadata record named ``cvc_balance`` (key ``machine_id``) right
-after the file's header, and for a rosbag2 directory also ``custom_data: {machine_id: ...}``
-in ``metadata.yaml``, where ``ros2 bag record --custom-data machine_id=...`` puts it.
+after the file's header, the ``custom_data`` of rosbag2's ``rosbag2`` record, and for a
+rosbag2 directory ``custom_data: {machine_id: ...}`` in ``metadata.yaml``, where
+``ros2 bag record --custom-data machine_id=...`` puts it.
 
 Read back by :func:`bag_custom_data` and :func:`machine_of` from any of: the
 ``cvc_balance`` record, rosbag2's own ``rosbag2`` record (``serialized_metadata``, the
-metadata.yaml text rosbag2's MCAP storage writes into each file), a directory's
-``metadata.yaml``. A bag that names no machine gets one from its path (see
+metadata rosbag2's MCAP storage writes into each file, without metadata.yaml's outer
+key), a directory's ``metadata.yaml``. A bag that names no machine gets one from its path (see
 :func:`machine_of`). Damaged files give what can be read, never an exception.
 """
 
@@ -19,12 +20,12 @@ import re
 
 import yaml
 
-from cvc_balance.bag.rosbag2 import CUSTOM_DATA_RECORD, METADATA
+from cvc_balance.bag.rosbag2 import METADATA
+from cvc_balance.bag.rosbag2_metadata import CUSTOM_DATA_RECORD, RECORD as ROSBAG2_RECORD
+from cvc_balance.bag.rosbag2_metadata import SERIALIZED
 
 MACHINE_ID = 'machine_id'
 """The custom-data key of the machine's identity."""
-ROSBAG2_RECORD = 'rosbag2'
-"""Name of the Metadata record rosbag2's MCAP storage writes (key serialized_metadata)."""
 FROM_BAG, FROM_PATH = 'bag', 'path'
 """Where :func:`machine_of` found the identity."""
 _ID = re.compile(r'^[A-Za-z0-9][A-Za-z0-9_.:/@+-]{0,127}$')
@@ -73,7 +74,7 @@ def mcap_custom_data(path):
     records = _metadata_records(path)
     if CUSTOM_DATA_RECORD in records:
         return dict(records[CUSTOM_DATA_RECORD])
-    serialized = records.get(ROSBAG2_RECORD, {}).get('serialized_metadata')
+    serialized = records.get(ROSBAG2_RECORD, {}).get(SERIALIZED)
     return _yaml_custom_data(serialized) if serialized else {}
 
 
@@ -109,14 +110,20 @@ def _read_text(path):
 
 
 def _yaml_custom_data(text):
-    """custom_data of a metadata.yaml text (rosbag2_bagfile_information), {} if none."""
+    """
+    custom_data of rosbag2's metadata text, {} if none.
+
+    A metadata.yaml (``rosbag2_bagfile_information`` and the metadata under it) or the
+    ``serialized_metadata`` of a ``rosbag2`` record (the metadata itself).
+    """
     if not text:
         return {}
     try:
         document = yaml.safe_load(text)
     except yaml.YAMLError:
         return {}
-    info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
+    info = document.get('rosbag2_bagfile_information', document) \
+        if isinstance(document, dict) else None
     data = info.get('custom_data') if isinstance(info, dict) else None
     if not isinstance(data, dict):
         return {}

@@ -13,6 +13,13 @@ of written chunks is let go once they are on disk: on virtual machines that
 hand freed memory back to the host, touching new pages costs more than
 compressing them. The framing records come from the ``mcap`` package; only
 chunks, message records and message indexes are packed here.
+
+As Jazzy's rosbag2 writes a file: each file carries rosbag2's ``rosbag2`` Metadata
+record (:mod:`cvc_balance.bag.rosbag2_metadata`) right after the header and again,
+complete, when it is closed; schemas are rosbag2's texts (:mod:`cvc_balance.messages.
+msg_schema`); each channel has ``offered_qos_profiles`` (in the form both rosbag2 and
+Foxglove read: :func:`~cvc_balance.bag.rosbag2_metadata.channel_qos`) and
+``topic_type_hash``.
 """
 
 from collections import defaultdict, deque
@@ -31,6 +38,8 @@ from mcap.writer import MCAP0_MAGIC
 import numpy as np
 
 from cvc_balance.bag.mcap_reader import BagError, crc32
+from cvc_balance.bag.rosbag2_metadata import (bag_metadata, channel_qos, CUSTOM_DATA_RECORD,
+                                              RECORD, record_values)
 from cvc_balance.messages.msg_schema import schema_text, type_hash
 
 PROFILE = 'ros2'
@@ -45,13 +54,6 @@ CACHED = 8
 """Chunks last written whose pages stay in the page cache (see BagWriter._let_go)."""
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 _INDEX_HEADER = np.dtype([('op', 'u1'), ('len', '<u8'), ('ch', '<u2'), ('n', '<u4')])
-_QOS = ('- history: 3\n  depth: 0\n  reliability: {reliability}\n  durability: {durability}\n'
-        '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
-        '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n'
-        '  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n'
-        '  avoid_ros_namespace_conventions: false\n')
-
-
 def _compressor(name, level=None):
     if name == 'zstd':
         import zstandard
@@ -221,15 +223,18 @@ class BagWriter:
     """Write a rosbag2-compatible MCAP file (see the module's description)."""
 
     def __init__(self, path, compression='zstd', chunk_bytes=1 << 20, level=None,
-                 metadata=None, exclusive=False):
+                 custom_data=None, exclusive=False, file_name=None):
         """
         Open ``path`` for writing; ``compression`` 'zstd', 'lz4' or ''.
 
         ``level`` is the compressor's level (default: zstd :data:`ZSTD_LEVEL`,
-        lz4 0); ``chunk_bytes`` the uncompressed size of a chunk. ``metadata``
-        ({name: {key: value}}, strings) is written as MCAP Metadata records right
-        after the header (so a truncated recording keeps them) and indexed in the
-        summary, e.g. the machine's identity (:mod:`cvc_balance.bag.machine`).
+        lz4 0); ``chunk_bytes`` the uncompressed size of a chunk. Right after the
+        header (so a truncated recording keeps them), in one system call: rosbag2's
+        ``rosbag2`` Metadata record as it is when a file is opened, and with
+        ``custom_data`` ({key: value} strings, e.g. the machine's identity,
+        :mod:`cvc_balance.bag.machine`) a Metadata record named ``cvc_balance`` of
+        it; both indexed in the summary, the custom data in rosbag2's record too.
+        ``file_name``: the file's name in rosbag2's metadata (default: its own).
         ``exclusive``: the file is created, never an existing one replaced (recordings,
         written in place): a :class:`~cvc_balance.bag.mcap_reader.BagError` if the
         name is taken (a file, a link, a directory).
@@ -266,17 +271,22 @@ class BagWriter:
         self._io = ThreadPoolExecutor(max_workers=1, thread_name_prefix='bag_writer')
         self._io_jobs = deque()
         self._index_templates = {}
+        self.file_name = file_name or os.path.basename(self.path)
+        self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self._write_all([MCAP0_MAGIC])
         self._emit(Header(profile=PROFILE, library=LIBRARY))
         self._metadata_indexes = []
-        for name, values in (metadata or {}).items():
-            record = Metadata(name=str(name), metadata={str(k): str(v)
-                                                        for k, v in values.items()})
-            start = self._emit(record)
-            self._metadata_indexes.append(MetadataIndex(offset=start,
-                                                        length=self._position - start,
-                                                        name=record.name))
+        first = [Metadata(name=RECORD, metadata=record_values(self.bag_metadata()))]
+        if self.custom_data:
+            first.append(Metadata(name=CUSTOM_DATA_RECORD, metadata=dict(self.custom_data)))
+        self._emit_metadata(first)
         self._closed = False
+
+    def bag_metadata(self):
+        """Return rosbag2's BagMetadata of what was written so far (see rosbag2_metadata)."""
+        topics, (first, last) = self.written()
+        files = [(self.file_name, first, last, sum(t.count for t in topics))]
+        return bag_metadata(files, topics, self.custom_data)
 
     def add_channel(self, topic, msg_type, latched=False, best_effort=False):
         """Register ``topic`` of ``msg_type`` ('pkg/msg/Type'); return its channel id."""
@@ -285,8 +295,7 @@ class BagWriter:
                             data=schema_text(msg_type).encode())
             self._schemas[msg_type] = schema
             self._emit(schema)
-        qos = _QOS.format(reliability=2 if best_effort else 1, durability=1 if latched else 2)
-        metadata = {'offered_qos_profiles': qos}
+        metadata = {'offered_qos_profiles': channel_qos(best_effort, latched)}
         if type_hash(msg_type):         # as rosbag2 (Jazzy) writes it
             metadata['topic_type_hash'] = type_hash(msg_type)
         channel = Channel(id=len(self._channels) + 1, topic=topic, message_encoding='cdr',
@@ -354,6 +363,8 @@ class BagWriter:
         self._wait_for_io()
         self._io.shutdown()
         self._workers.shutdown()
+        # rosbag2's record again, complete: rosbag2 reads the last one (ros2 bag info).
+        self._emit_metadata([Metadata(name=RECORD, metadata=record_values(self.bag_metadata()))])
         self._emit(DataEnd(data_section_crc=0))
         summary_start = self._position
         summary, offsets = RecordBuilder(), []
@@ -363,8 +374,6 @@ class BagWriter:
                   (Opcode.METADATA_INDEX, self._metadata_indexes),
                   (Opcode.CHUNK_INDEX, self._chunk_indexes))
         for opcode, records in groups:
-            if opcode == Opcode.METADATA_INDEX and not records:
-                continue                        # files without metadata stay as they were
             start = summary.count
             for record in records:
                 record.write(summary)
@@ -433,6 +442,19 @@ class BagWriter:
         builder = RecordBuilder()
         record.write(builder)
         return self._write_all([builder.end()])
+
+    def _emit_metadata(self, records):
+        """Write Metadata records in one system call (a kill keeps all or none); index them."""
+        built = []
+        for record in records:
+            builder = RecordBuilder()
+            record.write(builder)
+            built.append(builder.end())
+        start = self._write_all(built)
+        for record, raw in zip(records, built):
+            self._metadata_indexes.append(MetadataIndex(offset=start, length=len(raw),
+                                                        name=record.name))
+            start += len(raw)
 
     def _flush_pending(self):
         if not self._pending:

@@ -28,12 +28,13 @@ again (from the files: topics, types, offered QoS, counts, times), keeping the o
 from collections import Counter
 from contextlib import ExitStack
 from dataclasses import dataclass, field
+import io
 from pathlib import Path
 import struct
 
-from mcap.data_stream import RecordBuilder
+from mcap.data_stream import ReadDataStream, RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (AttachmentIndex, ChunkIndex, DataEnd, Footer, Header,
+from mcap.records import (AttachmentIndex, Channel, ChunkIndex, DataEnd, Footer, Header,
                           MessageIndex, MetadataIndex, Statistics, SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
@@ -42,7 +43,9 @@ import yaml
 from cvc_balance.bag.mcap_reader import (Bag, BagError, column, crc32, MESSAGE_HEADER,
                                          OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, record_table)
 from cvc_balance.bag.mcap_writer import _compressor, TopicWritten
-from cvc_balance.bag.rosbag2 import CUSTOM_DATA_RECORD, METADATA, metadata_yaml
+from cvc_balance.bag.rosbag2 import METADATA
+from cvc_balance.bag.rosbag2_metadata import (bag_metadata, CUSTOM_DATA_RECORD, metadata_yaml,
+                                              offered)
 from cvc_balance.files import created_when_done, replaced_when_done
 
 LOOSE_CHUNK = 1 << 20
@@ -172,11 +175,7 @@ def _reindex_directory(directory, output, in_place):
             _write_repaired(bag, staging / source.name, report)
             _check(source, staging / source.name, report)
         custom = old_custom or next((r.custom_data for r in reports if r.custom_data), {})
-        if len(files) == 1:
-            report = reports[0]
-            text = metadata_yaml(files[0].name, report.topics, *report.times, custom)
-        else:           # several files: keep their listing, counts from the files
-            text = _merged_metadata(reports, custom)
+        text = metadata_yaml(_directory_metadata(reports, custom))
         (staging / METADATA).write_text(text, encoding='utf-8')
     where = str(place())
     for report in reports:
@@ -194,32 +193,16 @@ def _yaml_custom_data(path):
     return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
 
-def _merged_metadata(reports, custom_data):
-    """metadata.yaml for several files: the first file's layout, every file listed."""
-    texts = [yaml.safe_load(metadata_yaml(Path(r.path).name, r.topics, *r.times))
-             ['rosbag2_bagfile_information'] for r in reports]
-    info = dict(texts[0])
-    counts = Counter()
-    for text in texts:
-        for entry in text['topics_with_message_count']:
-            counts[entry['topic_metadata']['name']] += entry['message_count']
-    seen = {}
-    for text in texts:
-        for entry in text['topics_with_message_count']:
-            seen.setdefault(entry['topic_metadata']['name'], entry)
-    info['topics_with_message_count'] = [dict(e, message_count=counts[name])
-                                         for name, e in seen.items()]
-    info['relative_file_paths'] = [Path(r.path).name for r in reports]
-    info['files'] = [f for text in texts for f in text['files']]
-    info['message_count'] = sum(counts.values())
-    info['custom_data'] = dict(custom_data) if custom_data else None
-    starts = [t['starting_time']['nanoseconds_since_epoch'] for t in texts if t['message_count']]
-    ends = [t['starting_time']['nanoseconds_since_epoch'] + t['duration']['nanoseconds']
-            for t in texts if t['message_count']]
-    if starts:
-        info['starting_time'] = {'nanoseconds_since_epoch': min(starts)}
-        info['duration'] = {'nanoseconds': max(ends) - min(starts)}
-    return yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
+def _directory_metadata(reports, custom_data):
+    """rosbag2's metadata of a directory's reindexed files: every file listed, topics summed."""
+    topics, counts = {}, Counter()
+    for report in reports:
+        for topic in report.topics:
+            topics.setdefault(topic.topic, topic)
+            counts[topic.topic] += topic.count
+    files = [(Path(r.path).name, *r.times, sum(t.count for t in r.topics)) for r in reports]
+    return bag_metadata(files, [t._replace(count=counts[name]) for name, t in topics.items()],
+                        custom_data)
 
 
 def _custom_data(bag):
@@ -233,8 +216,14 @@ def _topics(bag, counts):
     out = []
     for channel in bag.channels.values():
         raw = bag.definitions.get((OP_CHANNEL, channel.id), b'')
+        try:
+            qos = Channel.read(ReadDataStream(io.BytesIO(raw[9:]))).metadata.get(
+                'offered_qos_profiles', '')
+        except Exception:   # a damaged channel record: its QoS unknown (reliable, volatile)
+            qos = ''
+        best_effort, latched = offered(qos)
         out.append(TopicWritten(channel.topic, channel.msg_type, counts[channel.id],
-                                b'durability: 1' in raw, b'reliability: 2' in raw))
+                                latched, best_effort))
     return out
 
 

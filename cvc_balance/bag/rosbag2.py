@@ -37,13 +37,9 @@ import yaml
 
 from cvc_balance.bag.mcap_reader import Bag, BagError, MAGIC, select_channel
 from cvc_balance.bag.mcap_writer import BagWriter
-from cvc_balance.messages.msg_schema import type_hash
+from cvc_balance.bag.rosbag2_metadata import metadata_yaml
 
 METADATA = 'metadata.yaml'
-CUSTOM_DATA_RECORD = 'cvc_balance'
-"""Name of the MCAP Metadata record holding a bag's custom data (the machine's identity)."""
-VERSION = 9
-"""metadata.yaml version written (rosbag2 of ROS 2 Jazzy)."""
 SQLITE_MAGIC = b'SQLite format 3\x00'
 BATCH = 1 << 16
 """Messages read through rosbags packed into one buffer."""
@@ -291,20 +287,20 @@ def open_writer(path, compression='zstd', chunk_bytes=1 << 20, level=None, custo
 
     Both have the methods of :class:`~cvc_balance.bag.mcap_writer.BagWriter`.
     ``custom_data`` ({key: value} strings, e.g. ``{'machine_id': 'gantry-0042'}``) goes
-    into the MCAP file as a Metadata record named :data:`CUSTOM_DATA_RECORD` and, for a
-    directory, into ``metadata.yaml``'s ``custom_data`` too (as ``ros2 bag record
-    --custom-data`` puts it). ``exclusive`` (recordings): the file or directory is
-    created, an existing one refused (BagError), never replaced.
+    into the MCAP file as a Metadata record named ``cvc_balance`` and into
+    rosbag2's own record's metadata and, for a directory, into ``metadata.yaml``'s
+    ``custom_data`` (as ``ros2 bag record --custom-data`` puts it). ``exclusive``
+    (recordings): the file or directory is created, an existing one refused
+    (BagError), never replaced.
     """
     text = os.fspath(path)
-    metadata = {CUSTOM_DATA_RECORD: dict(custom_data)} if custom_data else None
+    options = dict(compression=compression, chunk_bytes=chunk_bytes, level=level,
+                   custom_data=dict(custom_data) if custom_data else None, exclusive=exclusive)
     if text.endswith('.mcap'):
-        return BagWriter(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
-                         metadata=metadata, exclusive=exclusive)
+        return BagWriter(text, **options)
     if text.endswith('.db3'):
         raise BagError(f'{text}: cannot write sqlite3 bags; give a .mcap file or a directory')
-    return Rosbag2Writer(text, compression=compression, chunk_bytes=chunk_bytes, level=level,
-                         metadata=metadata, exclusive=exclusive)
+    return Rosbag2Writer(text, **options)
 
 
 class Rosbag2Writer:
@@ -334,7 +330,6 @@ class Rosbag2Writer:
         self.path = str(self.directory)
         self.writer = BagWriter(self.directory / self.file_name, exclusive=exclusive,
                                 **options)
-        self.custom_data = dict((options.get('metadata') or {}).get(CUSTOM_DATA_RECORD) or {})
         self._closed = False
 
     def add_channel(self, topic, msg_type, latched=False, best_effort=False):
@@ -358,8 +353,7 @@ class Rosbag2Writer:
         if self._closed:
             return
         self.writer.close()
-        topics, (first, last) = self.writer.written()
-        text = metadata_yaml(self.file_name, topics, first, last, self.custom_data)
+        text = metadata_yaml(self.writer.bag_metadata())
         temporary = self.directory / f'.{METADATA}.tmp'
         temporary.write_text(text, encoding='utf-8')
         temporary.replace(self.directory / METADATA)
@@ -410,50 +404,3 @@ def _prepare_directory(directory):
         except OSError as error:
             raise BagError(f'{directory}: cannot make the bag directory: '
                            f'{error.strerror}') from None
-
-
-def metadata_yaml(file_name, topics, first, last, custom_data=None):
-    """
-    Return rosbag2's metadata.yaml (version 9) for one file of ``topics`` ([TopicWritten]).
-
-    ``first`` and ``last`` are the earliest and latest log times (ns, None if no
-    message was written); ``custom_data`` {key: value} strings (None: none).
-    """
-    count = sum(t.count for t in topics)
-    start = int(first) if first is not None else 0
-    duration = int(last) - int(first) if first is not None else 0
-
-    def span():              # a mapping of its own each time: no YAML anchors
-        return {'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': {'nanoseconds': duration}}
-    info = {
-        'version': VERSION,
-        'storage_identifier': 'mcap',
-        **span(),
-        'message_count': count,
-        'topics_with_message_count': [
-            {'topic_metadata': {'name': t.topic, 'type': t.msg_type,
-                                'serialization_format': 'cdr',
-                                'offered_qos_profiles': [_qos(t)],
-                                'type_description_hash': type_hash(t.msg_type)},
-             'message_count': t.count} for t in topics],
-        'compression_format': '',
-        'compression_mode': '',
-        'relative_file_paths': [file_name],
-        'files': [{'path': file_name, **span(), 'message_count': count}],
-        'custom_data': ({str(k): str(v) for k, v in custom_data.items()}
-                        if custom_data else None),
-        'ros_distro': 'jazzy',
-    }
-    return yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False)
-
-
-def _qos(topic):
-    """Return the offered QoS of a topic's publisher as metadata.yaml version 9 writes it."""
-    forever = {'sec': 2147483647, 'nsec': 4294967295}
-    return {'history': 'unknown', 'depth': 0,
-            'reliability': 'best_effort' if topic.best_effort else 'reliable',
-            'durability': 'transient_local' if topic.latched else 'volatile',
-            'deadline': dict(forever), 'lifespan': dict(forever), 'liveliness': 'automatic',
-            'liveliness_lease_duration': dict(forever),
-            'avoid_ros_namespace_conventions': False}

@@ -1,18 +1,29 @@
 """
-ros2msg schema texts for bags, from the installed .msg files, as rosbag2 writes them.
+ros2msg schema texts for bags, from the installed .msg files, as rosbag2 (Jazzy) writes them.
 
-The main type's .msg text, then each type it uses (depth first, once) after a
-line of 80 '=' and ``MSG: pkg/Type``. Files are found through the ament index
-or, for PyPI wheels, next to the message package's Python module.
+rosbag2_cpp's ``LocalMessageDefinitionSource::get_full_text``: the main type's .msg
+file as it is (bytes unchanged, its last newline kept), then for each type it uses,
+in the order of a ``std::set`` (byte order of 'pkg/Type') and depth first, each type
+once: a newline, a line of 80 '=', ``MSG: pkg/Type`` and that type's file. So
+WrenchStamped is followed by Wrench, Vector3, Header, Time (a blank line before each
+separator, since the files end in a newline). The types a text uses are found as
+rosbag2 finds them (:data:`FIELD_TYPE`, rosbag2's regular expression): the first word
+of a line, when it is not one of rosbag2's primitive types, qualified by the package
+of the file it is in when it names no package. Files are found through the ament
+index or, for PyPI wheels, next to the message package's Python module.
 """
 
 from functools import lru_cache
 import importlib
 from pathlib import Path
+import re
 
-PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16',
-              'uint16', 'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'}
+PRIMITIVES = frozenset({'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8',
+                        'int16', 'uint16', 'int32', 'uint32', 'int64', 'uint64', 'string'})
+"""rosbag2's PRIMITIVE_TYPES (it has no wstring: none of the types written here uses one)."""
 SEPARATOR = '=' * 80
+FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
+"""rosbag2's MSG_FIELD_TYPE_REGEX: a field's type, the first word of a line ("pkg/T[] x")."""
 
 
 def _msg_file(package, name):
@@ -33,42 +44,37 @@ def _msg_file(package, name):
                       f'{", ".join(map(str, candidates))})')
 
 
-def _field_types(text, package):
-    """Compound types used by a .msg text, as 'pkg/Type', in order of appearance."""
-    used = []
-    for line in text.splitlines():
-        tokens = line.split('#', 1)[0].split()
-        if len(tokens) < 2 or '=' in tokens[1] or (len(tokens) > 2 and tokens[2][0] == '='):
-            continue  # blank, comment or constant
-        kind = tokens[0].split('[')[0].split('<=')[0]
+def _msg_text(msg_type):
+    """The .msg file of 'pkg/Type' or 'pkg/msg/Type', as its bytes say (no newline translation)."""
+    package, *_, name = msg_type.split('/')
+    return _msg_file(package, name).read_bytes().decode('utf-8')
+
+
+def dependencies(text, package):
+    """Return the compound types a .msg text uses, as rosbag2 lists them: sorted 'pkg/Type'."""
+    used = set()
+    for match in FIELD_TYPE.finditer(text):
+        kind = match.group(1)
         if kind in PRIMITIVES:
             continue
-        if kind == 'Header':
-            kind = 'std_msgs/Header'
-        elif '/' not in kind:
-            kind = f'{package}/{kind}'
-        used.append(kind)
-    return used
+        used.add(kind if '/' in kind else f'{package}/{kind}')
+    return sorted(used, key=lambda kind: kind.encode())
 
 
 @lru_cache(maxsize=None)
 def schema_text(msg_type):
-    """Return the ros2msg schema of ``msg_type`` ('pkg/msg/Type'), dependencies appended."""
-    package, _, name = msg_type.split('/')
-    parts, seen = [_msg_file(package, name).read_text()], set()
+    """Return the ros2msg schema of ``msg_type`` ('pkg/msg/Type'), as rosbag2 writes it."""
+    seen = set()
 
-    def visit(text, owner):
-        for dependency in _field_types(text, owner):
-            if dependency in seen:
-                continue
-            seen.add(dependency)
-            dep_package, dep_name = dependency.split('/')
-            dep_text = _msg_file(dep_package, dep_name).read_text()
-            parts.append(f'{SEPARATOR}\nMSG: {dependency}\n{dep_text}')
-            visit(dep_text, dep_package)
+    def full_text(kind):
+        text = _msg_text(kind)
+        for dependency in dependencies(text, kind.split('/')[0]):
+            if dependency not in seen:
+                seen.add(dependency)
+                text += f'\n{SEPARATOR}\nMSG: {dependency}\n' + full_text(dependency)
+        return text
 
-    visit(parts[0], package)
-    return '\n'.join(p.rstrip('\n') for p in parts) + '\n'
+    return full_text(msg_type)
 
 
 @lru_cache(maxsize=None)
