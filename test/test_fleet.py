@@ -325,9 +325,14 @@ def test_machine_id_in_bags_read_by_others(tmp_path):
         files = [output] if output.suffix else sorted(output.glob('*.mcap'))
         with open(files[0], 'rb') as stream:
             reader = make_reader(stream, validate_crcs=True)
-            assert [(m.name, m.metadata) for m in reader.iter_metadata()] == \
-                [('cvc_balance', {'machine_id': 'site-a/gantry-17'})]
-            assert reader.get_summary().statistics.metadata_count == 1
+            records = [(m.name, m.metadata) for m in reader.iter_metadata()]
+            # rosbag2's record when the file was opened and closed, ours after the first
+            assert [name for name, _ in records] == ['rosbag2', 'cvc_balance', 'rosbag2']
+            assert records[1][1] == {'machine_id': 'site-a/gantry-17'}
+            for _, values in records[::2]:
+                assert yaml.safe_load(values['serialized_metadata'])['custom_data'] == \
+                    {'machine_id': 'site-a/gantry-17'}
+            assert reader.get_summary().statistics.metadata_count == 3
             count = sum(1 for _ in reader.iter_messages())
         with AnyReader([output]) as bag:
             assert sum(1 for _ in bag.messages()) == count > 4000
@@ -342,8 +347,9 @@ def test_machine_id_in_bags_read_by_others(tmp_path):
     with open(foreign, 'wb') as stream:
         writer = Writer(stream)
         writer.start(profile='ros2', library='test')
+        # as rosbag2's MCAP storage writes it: the metadata itself, no outer key
         writer.add_metadata('rosbag2', {'serialized_metadata': yaml.safe_dump(
-            {'rosbag2_bagfile_information': {'custom_data': {'machine_id': 'gantry-9b'}}})})
+            {'version': 9, 'custom_data': {'machine_id': 'gantry-9b'}})})
         writer.finish()
     assert machine_of(foreign, tmp_path) == ('gantry-9b', 'bag')
     # No id anywhere: the folder below the root searched; a truncated file keeps its record.

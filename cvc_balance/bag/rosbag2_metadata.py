@@ -15,19 +15,24 @@ same YAML emitter (yaml-cpp's, default settings: :func:`emit`):
 
 The keys come in the order of rosbag2's ``convert<BagMetadata>::encode``; topics in the
 order the channels were made (rosbag2's own order is an unordered_map's, so no file can
-match it byte for byte there). Offered QoS is written two ways, on purpose:
+match it byte for byte there). Offered QoS deviates from Jazzy's bytes on purpose, so
+that every reader takes it alike:
 
-* in the YAML metadata, as version 9 does: policies as strings (``best_effort``) and an
-  infinite duration as ``RMW_DURATION_INFINITE`` {sec: 9223372036, nsec: 854775807}.
-  rosbag2 and rosbags read these; Foxglove's readers do not read this YAML;
 * in each MCAP channel's ``offered_qos_profiles`` (:func:`channel_qos`), which Foxglove
-  reads too, as Foxy wrote it: policies as integers (reliability 2 = best effort) and
-  infinity as Fast DDS's Foxy value {2147483647, 4294967295}. Foxglove's QoS parser
-  (``@foxglove/rosbag2`` ``parseQosProfiles``) reads integers only (a string policy
-  becomes its default: reliable, volatile) and takes exactly this duration as
-  infinite; rosbag2 reads integers as well as strings (it tells them apart by the
-  history field) and maps this duration to ``RMW_DURATION_INFINITE``. Written as Jazzy
-  writes it, a best-effort or latched topic would read as reliable, volatile in Foxglove.
+  reads too: policies as integers (reliability 2 = best effort), as Foxy to Iron wrote
+  them. Foxglove's QoS parser (``@foxglove/rosbag2`` ``parseQosProfiles``) reads
+  integers only: Jazzy's strings (``best_effort``) become its defaults, reliable and
+  volatile, so a best-effort or latched topic would read as neither. rosbag2 reads
+  integers as well as strings (it tells them apart by the history field);
+* everywhere (channels, metadata.yaml, the ``rosbag2`` record), an infinite duration as
+  Fast DDS's Foxy value {sec: 2147483647, nsec: 4294967295} (:data:`FOXY_INFINITE`),
+  not Jazzy's ``RMW_DURATION_INFINITE`` {9223372036, 854775807}: rosbag2 maps the Foxy
+  value to ``RMW_DURATION_INFINITE`` and Foxglove's parser takes exactly it as
+  infinite, where it would read Jazzy's as a finite 292 years. The same value in
+  metadata.yaml as in the channels, since rosbags matches a directory's topics to the
+  files' channels by their QoS too (it read no message of a directory whose two
+  differed);
+* in the YAML metadata, policies as strings, as version 9 writes them.
 """
 
 ROS_DISTRO = 'jazzy'
@@ -41,8 +46,6 @@ CUSTOM_DATA_RECORD = 'cvc_balance'
 """Name of the MCAP Metadata record holding a bag's custom data (the machine's identity)."""
 NEVER = (1 << 63) - 1
 """rosbag2's start time of a file before its first message: std::chrono::nanoseconds::max()."""
-RMW_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
-"""RMW_DURATION_INFINITE as rosbag2 (Jazzy) writes it in YAML."""
 FOXY_INFINITE = {'sec': 2147483647, 'nsec': 4294967295}
 """Fast DDS's infinite duration in Foxy's bags: infinite to rosbag2 and to Foxglove alike."""
 
@@ -157,28 +160,26 @@ def qos_profile(best_effort=False, latched=False):
 
     What Jazzy's recorder stores of a publisher: history and depth unknown to the
     middleware (``unknown``, 0), the reliability and durability offered, no deadline,
-    lifespan or lease (infinite), automatic liveliness.
+    lifespan or lease (infinite: :data:`FOXY_INFINITE`, see the module's description),
+    automatic liveliness.
     """
     return {'history': 'unknown', 'depth': 0,
             'reliability': 'best_effort' if best_effort else 'reliable',
             'durability': 'transient_local' if latched else 'volatile',
-            'deadline': dict(RMW_INFINITE), 'lifespan': dict(RMW_INFINITE),
-            'liveliness': 'automatic', 'liveliness_lease_duration': dict(RMW_INFINITE),
+            'deadline': dict(FOXY_INFINITE), 'lifespan': dict(FOXY_INFINITE),
+            'liveliness': 'automatic', 'liveliness_lease_duration': dict(FOXY_INFINITE),
             'avoid_ros_namespace_conventions': False}
 
 
 def channel_qos(best_effort=False, latched=False):
     """
-    Return an MCAP channel's ``offered_qos_profiles``: integers, Foxy's infinity.
+    Return an MCAP channel's ``offered_qos_profiles``: :func:`qos_profile`, policies as integers.
 
-    The one form both rosbag2 and Foxglove read the same (see the module's description):
-    the same profile as :func:`qos_profile`, each policy by its rmw enum value.
+    The one form both rosbag2 and Foxglove read the same (see the module's description).
     """
     profile = qos_profile(best_effort, latched)
     for policy, values in _POLICIES.items():
         profile[policy] = values[profile[policy]]
-    for duration in ('deadline', 'lifespan', 'liveliness_lease_duration'):
-        profile[duration] = dict(FOXY_INFINITE)
     return emit([profile])
 
 
