@@ -6,6 +6,7 @@
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
 #   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer headless, at 6.5 s of the bag)
 #   ./dev.sh docs      build the documentation site (Sphinx, warnings as errors); prints index.html
+#   ./dev.sh bags      make the bundled bags again from their scenarios (bags/X.yaml -> bags/X.mcap)
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 venv="$here/.venv"
@@ -138,6 +139,15 @@ docs() {
   echo "$out/index.html"
 }
 
+bags() {
+  # Each bundled bag (bags/X.mcap) is what `cvc-balance simulate` makes of its scenario
+  # (bags/X.yaml) now; test_bags.py checks that they decode equal to a fresh simulation.
+  local bag
+  for bag in "$here"/bags/*.mcap; do
+    in_venv cvc-balance simulate "${bag%.mcap}.yaml" -o "$bag"
+  done
+}
+
 cmd="${1:-}"
 shift || true
 case "$cmd" in
@@ -159,7 +169,10 @@ case "$cmd" in
   docs)
     setup
     docs ;;
+  bags)
+    setup
+    bags ;;
   *)
-    sed -n '2,8p' "$0" >&2
+    sed -n '2,9p' "$0" >&2
     exit 2 ;;
 esac
