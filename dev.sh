@@ -118,6 +118,26 @@ vulkan() {
   return 1
 }
 
+node_readers() {
+  # Foxglove's TypeScript readers for test/test_foxglove_readers.py: Node.js and npm
+  # (Debian's, when the machine has none) and the packages of test/js/package-lock.json.
+  if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+    if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+      echo "dev.sh: installing nodejs npm (Foxglove's readers, in the tests)" >&2
+      apt-get update -qq && apt-get install -y -qq nodejs npm >/dev/null || return 1
+    else
+      echo "dev.sh: nodejs and npm are missing and cannot be installed here (needs root" \
+        "and apt-get)" >&2
+      return 1
+    fi
+  fi
+  local js="$here/test/js"
+  if [ ! -f "$js/node_modules/.package-lock.json" ] ||
+     [ "$js/package-lock.json" -nt "$js/node_modules/.package-lock.json" ]; then
+    (cd "$js" && npm ci --no-audit --no-fund --loglevel=error) || return 1
+  fi
+}
+
 screenshot() {
   # The rerun viewer on the bundled tube-swap bag, rendered headless (Mesa's Vulkan
   # drivers), its time cursor set to 6.5 s after the first sample: after the tube swap,
@@ -158,6 +178,7 @@ case "$cmd" in
   test)
     setup
     vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
+    node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
     colcon_check
     cd "$here" && in_venv python -m pytest "$@" ;;
   run)
