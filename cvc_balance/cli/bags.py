@@ -1,5 +1,5 @@
 """
-Commands on bags: simulate, replay, view (rerun), play and record (live, ROS).
+Commands on bags: simulate, replay, view (rerun), play, info and record (live, ROS).
 
 Heavy modules (rclpy, rerun) are imported by the command that needs them only.
 """
@@ -16,7 +16,7 @@ from cvc_balance.physics.motion import MAX_STAMP_JUMP
 
 
 def register(commands):
-    """Add simulate, replay, view, play and record."""
+    """Add simulate, replay, view, play, info and record."""
     simulate = commands.add_parser('simulate', help='make an input bag from a scenario',
                                    description='Write a bag of /layout and /joint_states '
                                    'from a scenario file (speed profile, noise, layout changes).')
@@ -89,6 +89,22 @@ def register(commands):
                       "or the recorder sees none of the node's outputs, within S seconds "
                       '(default 20)')
     play.set_defaults(run=_play)
+
+    info = commands.add_parser('info', help='what ros2 bag info prints of a bag, and its '
+                               'machine and layouts',
+                               description='Print what ros2 bag info prints of a bag (files, '
+                               'size, storage, ROS distro, duration, start and end in local '
+                               'time, messages, each topic with its type, count and '
+                               'serialization format), then the machine it was recorded on '
+                               'and its layouts (name, digest, log time they came into '
+                               'force). Counts and times are of the messages read.')
+    info.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    info.add_argument('--json', action='store_true',
+                      help='print one JSON object: path, files, bag_size (bytes), '
+                      'storage_identifier, ros_distro, duration_ns, start_ns, end_ns, '
+                      'message_count, topics [{name, type, count, serialization_format}], '
+                      'machine_id, layouts [{log_time_ns, name, digest, rejected}], problems')
+    info.set_defaults(run=_info)
 
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
                                  description='Record the run\'s inputs and outputs (raw CDR) '
@@ -225,6 +241,16 @@ def _play(args):
         check_new_output(args.output)
         check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
     return play_main(args)
+
+
+def _info(args):
+    from cvc_balance.bag.info import bag_info, format_info, info_record
+    found = bag_info(args.bag)
+    if args.json:
+        print_json(info_record(found))
+    else:
+        print(format_info(found))
+    return 0
 
 
 def _record(args):
