@@ -175,4 +175,4 @@ def test_info_of_what_is_not_a_bag_is_one_line(tmp_path):
     for path in (tmp_path / 'missing.mcap', tmp_path / 'notes.txt', tmp_path):
         code, out, err = info(path)
         assert code == 2 and out == '', path
-        assert len(err.splitlines()) == 1 and err.startswith('cvc-balance: error: '), err
+        assert len(err.splitlines()) == 1 and err.startswith(f'cvc-balance: error: {path}: ')
