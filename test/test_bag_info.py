@@ -14,7 +14,6 @@ from pathlib import Path
 import subprocess
 import sys
 
-from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.records import Channel, Message
 from mcap.writer import Writer
@@ -37,7 +36,7 @@ def info(*args):
 
 
 def when(ns):
-    """ns as ros2 bag info writes a time, in UTC, written here with datetime."""
+    """Write ``ns`` as ros2 bag info writes a time, in UTC, here with datetime."""
     moment = datetime.fromtimestamp(ns // 10**9, tz=timezone.utc)
     return (f'{moment:%b} {moment.day:2d} {moment.year} {moment:%H:%M:%S}.{ns % 10**9:09d} '
             f'({ns // 10**9}.{ns % 10**9:09d})')
@@ -70,7 +69,7 @@ def library_reading(files):
 
 @pytest.fixture(scope='module')
 def bags(tmp_path_factory):
-    """The tube-swap scenario with a machine id, as a file and as a rosbag2 directory."""
+    """Simulate the tube-swap scenario with a machine id, as a file and as a directory."""
     base = tmp_path_factory.mktemp('info')
     for name in ('run.mcap', 'run'):
         run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'simulate', SCENARIO,

@@ -68,7 +68,7 @@ def wrench(msg):
 
 
 def plain(value):
-    """A decoded message (rosbags dataclasses, numpy arrays) as plain Python values."""
+    """Return a decoded message (rosbags dataclasses, numpy arrays) as plain Python values."""
     if dataclasses.is_dataclass(value):
         return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
     if isinstance(value, np.ndarray):

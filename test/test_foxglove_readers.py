@@ -79,7 +79,7 @@ def our_counts(path):
 
 
 def assert_read_whole(found, counts, qos=None):
-    """What Foxglove read of one bag (read_bags.js's entry) against ``counts`` {topic: n}."""
+    """Check what Foxglove read of one bag (read_bags.js's entry) against ``counts``."""
     stream, indexed = {}, {}
     for file in found['files']:
         assert file['errors'] == [], file['file']
@@ -204,4 +204,3 @@ def test_live_recordings_finished_and_killed(foxglove, tmp_path):
     assert_read_whole(found[report.output], killed_counts,
                       {'/joint_states': (BEST_EFFORT, VOLATILE)})
     assert our_counts(outputs[0])['/joint_states'] > 300
-

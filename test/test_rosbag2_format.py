@@ -1,9 +1,9 @@
-"""
+r"""
 The bytes rosbag2 (Jazzy) writes, where it is deterministic: schema texts and metadata.
 
 * Schema texts against ones built here the way rosbag2_cpp's ``get_full_text`` builds
   them (written again, line by line, from its source: the file's text, then per
-  dependency in ``std::set`` order, depth first, "\\n", 80 '=', "MSG: pkg/Type\\n" and the
+  dependency in ``std::set`` order, depth first, "\n", 80 '=', "MSG: pkg/Type\n" and the
   file), from the .msg files the ament index gives, for every type the project writes.
 * The YAML emitter against files rosbag2 itself wrote (test/data/rosbag2: its
   metadata.yaml, the ``serialized_metadata`` of its two ``rosbag2`` records, its channels'
@@ -33,14 +33,14 @@ PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'in
 
 
 def msg_file(kind):
-    """The .msg file of 'pkg/Type' or 'pkg/msg/Type', found as rosbag2 does (ament index)."""
+    """Return the .msg file of 'pkg/Type' or 'pkg/msg/Type', found as rosbag2 does."""
     from ament_index_python.packages import get_package_share_directory
     package, *_, name = kind.split('/')
     return Path(get_package_share_directory(package)) / 'msg' / f'{name}.msg'
 
 
 def used_types(text, package):
-    """The types a .msg text's fields use, line by line (rosbag2: the first word of a line)."""
+    """Return the types a .msg text's fields use, line by line (a line's first word)."""
     used = set()
     for line in text.split('\n'):
         words = line.split()
@@ -99,7 +99,7 @@ def test_emitter_writes_the_bytes_rosbag2_wrote():
 
 @pytest.fixture(scope='module')
 def written(tmp_path_factory):
-    """The tilted-shift scenario simulated with a machine id: a file and a directory."""
+    """Simulate the tilted-shift scenario with a machine id: a file and a directory."""
     base = tmp_path_factory.mktemp('format')
     for name in ('one.mcap', 'dir'):
         run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'simulate',
@@ -151,4 +151,3 @@ def test_rosbag2_records_say_what_the_file_holds(written, name, file):
             qos = {c.topic: c.ext.offered_qos_profiles[0] for c in reader.connections}
         assert qos['/layout'].durability.name == 'TRANSIENT_LOCAL'
         assert qos['/joint_states'].reliability.name == 'BEST_EFFORT'
-

@@ -117,7 +117,7 @@ def _size(path):
 
 
 def _ros_distro(path, parts):
-    """The ROS distro rosbag2 wrote: metadata.yaml's, else the last rosbag2 record's; or ''."""
+    """Return the ROS distro rosbag2 wrote: metadata.yaml's, else the last rosbag2 record's."""
     directory = path if path.is_dir() else path.parent if path.name == METADATA else None
     if directory is not None:
         try:
@@ -223,4 +223,3 @@ def info_record(info):
                     for layout in info.layouts],
         'problems': info.problems,
     }
-

@@ -54,6 +54,8 @@ CACHED = 8
 """Chunks last written whose pages stay in the page cache (see BagWriter._let_go)."""
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 _INDEX_HEADER = np.dtype([('op', 'u1'), ('len', '<u8'), ('ch', '<u2'), ('n', '<u4')])
+
+
 def _compressor(name, level=None):
     if name == 'zstd':
         import zstandard

@@ -45,7 +45,7 @@ def _msg_file(package, name):
 
 
 def _msg_text(msg_type):
-    """The .msg file of 'pkg/Type' or 'pkg/msg/Type', as its bytes say (no newline translation)."""
+    """Return the .msg file of 'pkg/Type' or 'pkg/msg/Type' as its bytes say (newlines kept)."""
     package, *_, name = msg_type.split('/')
     return _msg_file(package, name).read_bytes().decode('utf-8')
 
