@@ -111,7 +111,7 @@ def test_record_refuses_an_existing_bag_a_link_to_one_and_a_bag_directory(
     monkeypatch.setattr(recorder, 'record_main', started)
     bag = tmp_path / 'run.mcap'
     shutil.copy(BAGS / 'spin_up_tube_swap.mcap', bag)
-    assert bag.stat().st_size == 197_400
+    size = bag.stat().st_size
     os.link(bag, tmp_path / 'hard.mcap')
     (tmp_path / 'soft.mcap').symlink_to(bag)
     (tmp_path / 'dangling.mcap').symlink_to(tmp_path / 'nothing.mcap')
@@ -121,7 +121,7 @@ def test_record_refuses_an_existing_bag_a_link_to_one_and_a_bag_directory(
         code, _, stderr = run_cli('record', '-o', tmp_path / name, '--machine-id', 'gantry-7')
         assert code == 2, (name, stderr)
         one_line(stderr, f'{tmp_path / name}: exists; a recording never replaces it')
-    assert digest(bag) == before and bag.stat().st_size == 197_400
+    assert digest(bag) == before and bag.stat().st_size == size
     assert not (tmp_path / 'nothing.mcap').exists()
     assert sorted(p.name for p in (tmp_path / 'folder').iterdir()) == \
         sorted(p.name for p in BAGS.iterdir())

@@ -13,6 +13,8 @@ The bytes rosbag2 (Jazzy) writes, where it is deterministic: schema texts and me
 """
 
 from pathlib import Path
+import select
+import signal
 import subprocess
 import sys
 
@@ -151,3 +153,53 @@ def test_rosbag2_records_say_what_the_file_holds(written, name, file):
             qos = {c.topic: c.ext.offered_qos_profiles[0] for c in reader.connections}
         assert qos['/layout'].durability.name == 'TRANSIENT_LOCAL'
         assert qos['/joint_states'].reliability.name == 'BEST_EFFORT'
+
+
+def test_record_takes_the_publishers_qos_as_rosbag2_does(tmp_path):
+    """
+    A topic found by a pattern is subscribed and recorded as its publishers offer.
+
+    Before, by its name: every supports/*/load reliable, so a best-effort publisher's
+    messages never came (an incompatible QoS) and its topic was recorded empty.
+    """
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import qos_profile_sensor_data, QoSProfile
+    from ros_harness import Probe, ros_environment
+    probe = Probe('qos_probe')
+    out = tmp_path / 'rec.mcap'
+    recorder = None
+    try:
+        front = probe.node.create_publisher(WrenchStamped, 'supports/front/load',
+                                            qos_profile_sensor_data)
+        rear = probe.node.create_publisher(WrenchStamped, 'supports/rear/load',
+                                           QoSProfile(depth=10))
+        recorder = subprocess.Popen(
+            [sys.executable, '-m', 'cvc_balance.cli', 'record', '-o', str(out),
+             'supports/*/load', '--ready-when', 'supports/front/load',
+             '--ready-when', 'supports/rear/load'],
+            env=ros_environment(), stdout=subprocess.PIPE, text=True)
+        assert probe.spin_until(lambda: front.get_subscription_count() >= 1 and
+                                rear.get_subscription_count() >= 1, timeout=20)
+        said, _, _ = select.select([recorder.stdout], [], [], 20)    # ready, a pattern's too
+        assert said and recorder.stdout.readline().strip() == 'ready'
+        for _ in range(20):
+            front.publish(WrenchStamped())
+            rear.publish(WrenchStamped())
+            probe.spin_for(0.01)
+        probe.spin_for(0.3)
+        recorder.send_signal(signal.SIGINT)
+        recorder.communicate(timeout=20)
+    finally:
+        if recorder is not None:
+            recorder.kill()
+        probe.close()
+    with open(out, 'rb') as stream:
+        summary = make_reader(stream, validate_crcs=True).get_summary()
+    qos = {}
+    for channel in summary.channels.values():
+        profile, = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+        qos[channel.topic] = (profile['reliability'], profile['durability'])
+    assert qos == {'/supports/front/load': (2, 2), '/supports/rear/load': (1, 2)}
+    counts = {summary.channels[c].topic: n
+              for c, n in summary.statistics.channel_message_counts.items()}
+    assert counts == {'/supports/front/load': 20, '/supports/rear/load': 20}

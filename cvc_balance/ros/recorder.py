@@ -95,11 +95,30 @@ class BagRecorder:
         self.writer.write(self._channels[name], log_time, data)
         self.counts[name] += 1
 
+    def _offered(self, name):
+        """
+        Return (best effort, latched) as rosbag2 adapts to the topic's publishers, or None.
+
+        rosbag2's recorder (``Rosbag2QoS::adapt_request_to_offers``) subscribes reliable
+        only when every publisher offers reliable, transient local only when every one
+        does, and records the publishers' offers. The bag gets that profile, in the
+        form both rosbag2 and Foxglove read (``bag.rosbag2_metadata``: integers, Foxy's
+        infinite durations). None without publishers yet.
+        """
+        offers = [info.qos_profile for info in self.node.get_publishers_info_by_topic(name)]
+        if not offers:
+            return None
+        return (any(q.reliability != ReliabilityPolicy.RELIABLE for q in offers),
+                all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offers))
+
     def _subscribe(self, name, msg_type):
         short = name.rsplit('/', 1)[-1]
-        latched = short == topics.LAYOUT
-        # Sensor streams are best effort: a reliable subscription would match none.
-        best_effort = short in (topics.JOINT_STATES, topics.SPEED, topics.MEASURED_LOAD)
+        # Without publishers yet, what the project's own publishers offer (ros/qos.py): the
+        # layout latched; sensor streams best effort (a reliable subscription would match
+        # none of them).
+        best_effort, latched = self._offered(name) or (
+            short in (topics.JOINT_STATES, topics.SPEED, topics.MEASURED_LOAD),
+            short == topics.LAYOUT)
         channel = self.writer.add_channel(name, msg_type, latched=latched,
                                           best_effort=best_effort)
         self._channels[name] = channel
@@ -135,10 +154,12 @@ def record_main(args):
                            '' if args.compression == 'none' else args.compression,
                            args.chunk_kib * 1024, args.machine_id)
     if args.ready_when:
-        # Say 'ready' once the subscriptions have matched a publisher (reader side).
-        wanted = [recorder.subscription(node.resolve_topic_name(t)) for t in args.ready_when]
+        # Say 'ready' once the subscriptions have matched a publisher (reader side); a
+        # topic found by a pattern has its subscription once it is discovered.
+        names = [node.resolve_topic_name(t) for t in args.ready_when]
 
         def check():
+            wanted = [recorder.subscription(name) for name in names]
             if all(s is not None and s.get_publisher_count() > 0 for s in wanted):
                 print('ready', flush=True)
                 timer.cancel()
