@@ -111,3 +111,39 @@ def test_check_output_cases(tmp_path):
         check_output(tmp_path / 'in.txt', [tmp_path / 'in.txt'])
     with pytest.raises(OutputError, match='does not exist'):
         check_output(tmp_path / 'a' / 'b.txt')
+
+
+def test_fleet_outputs_are_checked_before_the_work(tmp_path, monkeypatch, capsys):
+    """
+    ``trends -o`` and ``simulate-fleet -o``: a file, the results table, a missing folder.
+
+    Before, they were found after the work ("[Errno 17] File exists: 'table.parquet'"), and
+    ``trends -o /a/b/c`` made the folders. The work is replaced here by a stand-in that
+    fails the test if reached.
+    """
+    from cvc_balance.cli import main
+    from cvc_balance.fleet import simulate, trends
+
+    def reached(*args, **kwargs):
+        raise AssertionError('the work started before the output was checked')
+    monkeypatch.setattr(trends, 'machine_trends', reached)
+    monkeypatch.setattr(simulate, 'simulate_fleet', reached)
+    table = tmp_path / 'table.parquet'
+    table.write_bytes(b'PAR1 not really')
+    (tmp_path / 'notes.txt').write_text('keep me')
+    layout = ROOT / 'config' / 'ct_gantry.yaml'
+    cases = [(['trends', table, '-o', table], f'{table}: exists and is not a directory'),
+             (['trends', table, '-o', tmp_path / 'notes.txt'], 'exists and is not a directory'),
+             (['trends', table, '-o', tmp_path / 'a' / 'b'],
+              f'folder {tmp_path / "a"} does not exist'),
+             (['simulate-fleet', layout, '-o', tmp_path / 'notes.txt'],
+              'exists and is not a directory'),
+             (['simulate-fleet', layout, '-o', tmp_path / 'x' / 'y'],
+              f'folder {tmp_path / "x"} does not exist')]
+    for argv, says in cases:
+        assert main([str(a) for a in argv]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count('\n') == 1 and says in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['notes.txt', 'table.parquet']
+    assert (tmp_path / 'notes.txt').read_text() == 'keep me'
+    assert table.read_bytes() == b'PAR1 not really'

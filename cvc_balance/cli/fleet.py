@@ -127,10 +127,13 @@ def _fleet(args):
 
 
 def _trends(args):
+    from cvc_balance.files import check_output
     from cvc_balance.fleet.trends import machine_trends, trend_summary
     if not Path(args.results).is_file():
         raise FileNotFoundError(f'{args.results}: no such results table (make it with '
                                 'cvc-balance fleet PATH --out RESULTS)')
+    if args.output:         # before the work: a folder that can be written, not the table
+        check_output(args.output, [args.results], directory=True)
     try:
         trends = machine_trends(args.results, args.machine, args.now)
     except Exception as error:
@@ -142,8 +145,10 @@ def _trends(args):
         raise ValueError(f'{args.results}: no runs of machine {args.machine!r}')
     shown = trends[:args.top] if args.top else trends
     rows = [_row(rank, trend) for rank, trend in enumerate(shown, 1)]
-    if args.output:
-        _write_outputs(Path(args.output), trends, rows)
+    if args.output:         # charts and table moved in together once all are written
+        from cvc_balance.files import moved_into_when_done
+        with moved_into_when_done(args.output) as staging:
+            _write_outputs(staging, trends, rows)
     if args.json:
         print_json({'results': str(args.results), 'machines': [
             dict(trend_summary(t), rank=rank) for rank, t in enumerate(shown, 1)]})
@@ -190,7 +195,6 @@ def _table(rows):
 def _write_outputs(directory, trends, rows):
     import csv
     from cvc_balance.fleet.charts import chart_name, fleet_chart, machine_chart
-    directory.mkdir(parents=True, exist_ok=True)
     for trend in trends:
         machine_chart(trend, directory / chart_name(trend.machine_id))
     fleet_chart(trends, directory / 'fleet.png')
@@ -202,7 +206,9 @@ def _write_outputs(directory, trends, rows):
 
 def _simulate(args):
     import yaml
+    from cvc_balance.files import check_output
     from cvc_balance.fleet.simulate import simulate_fleet
+    check_output(args.output, [args.layout], directory=True)     # before the work
     plans = simulate_fleet(args.layout, args.output, args.machines, args.runs, args.days,
                            args.start.replace(tzinfo=None).isoformat(), args.seed, args.rate,
                            args.cell_rate)
