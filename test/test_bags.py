@@ -27,6 +27,7 @@ from cvc_balance.bag.mcap_reader import Bag, BagError, joint_samples
 from cvc_balance.bag.replay import replay
 from cvc_balance.bag.scenario import load_scenario, write_bag
 from cvc_balance.physics.engine import RotorModel
+from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.unbalance import static_unbalance
 from ros_harness import ros_environment
 from scenario_reference import expected_outputs
@@ -215,6 +216,45 @@ def test_what_if_layout(tmp_path):
     assert summary.segments[0].layout.name == 'ct_gantry_demo'
     assert len(summary.segments[0].layout.components) == 9
     assert summary.segments[0].samples == 6001
+
+
+def test_layouts_sharing_a_log_time_keep_their_own_texts(tmp_path):
+    """
+    The output's /layout repeats each accepted layout's own text, even at one log time.
+
+    Before, the text was looked up by log time: a rejected layout before a good one at the
+    same time went out as the good one's text, and of two good ones the first twice.
+    """
+    from cvc_balance.bag.mcap_writer import BagWriter, MessageBlock
+    from cvc_balance.messages.cdr import joint_state_layout, string_message
+    base = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
+    texts = []
+    for mass in (60.0, 60.5, 61.0):
+        layout = dict(base, components=[dict(c, mass=mass) if c['name'] == 'xray_tube' else c
+                                        for c in base['components']])
+        texts.append(yaml.safe_dump(layout, sort_keys=False))
+    bad = 'name: broken\ncomponents: [{name: x, mass: -1}]\n'
+    path = tmp_path / 'in.mcap'
+    stamps = np.arange(1_000_000_000, 3_000_000_000, 2_000_000, dtype=np.int64)
+    with BagWriter(path) as writer:
+        layout_channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
+        joints = writer.add_channel('/joint_states', 'sensor_msgs/msg/JointState',
+                                    best_effort=True)
+        for log_time, text in ((999_000_000, bad), (999_000_000, texts[0]),
+                               (1_999_000_000, texts[1]), (1_999_000_000, texts[2])):
+            writer.write(layout_channel, log_time, string_message(text))
+        block = MessageBlock([(joints, joint_state_layout('', ['gantry_joint']))], len(stamps))
+        block.array['0.sec'], block.array['0.nanosec'] = np.divmod(stamps, 1_000_000_000)
+        block.array['0.position_0'] = 0.0
+        block.array['0.velocity_0'] = 10.0
+        writer.write_block(block, stamps)
+    summary = replay(path, tmp_path / 'out.mcap')
+    assert any('rejected' in p for p in summary.problems)
+    written = read_with_rosbags(tmp_path / 'out.mcap')['/layout']
+    assert [(t, m.data) for t, m in written] == \
+        [(999_000_000, texts[0]), (1_999_000_000, texts[1]), (1_999_000_000, texts[2])]
+    assert [s.layout.digest() for s in summary.segments] == \
+        [parse_layout(yaml.safe_load(t)).digest() for t in texts]
 
 
 def test_truncated_bag_uses_what_could_be_read(tmp_path):

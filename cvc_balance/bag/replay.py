@@ -112,15 +112,29 @@ def layout_events(bag, layout_messages, layout_file=None):
     :data:`SAID` of them one by one, then their count) and the previous one stays in
     force (before the first good one: none). Raises BagError when no layout is usable.
     """
+    events, problems = layouts_in_force(bag, layout_messages, layout_file)
+    return [(log_time, layout) for log_time, layout, _ in events], problems
+
+
+def layouts_in_force(bag, layout_messages, layout_file=None):
+    """
+    Return ([(log time ns, Layout, its text)], problems): :func:`layout_events` with texts.
+
+    Each layout keeps the text it was parsed from (the file's for ``layout_file``), so
+    the output bag repeats that text even when several layout messages share a log time.
+    """
     problems = []
     if layout_file is not None:
         from cvc_balance.physics.layout_file import load_layout
-        events = [(np.iinfo(np.int64).min, load_layout(layout_file))]
+        with open(layout_file, encoding='utf-8') as stream:
+            text = stream.read()
+        events = [(np.iinfo(np.int64).min, load_layout(layout_file), text)]
     else:
         events, rejected = [], 0
         for log_time, text in layout_messages:
             try:
-                events.append((log_time, layout_from_text(text, source='layout message')))
+                events.append((log_time, layout_from_text(text, source='layout message'),
+                               text))
                 continue
             except LayoutError as error:
                 why = str(error)
@@ -167,7 +181,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     if motion.skipped:
         summary.skipped_reason = (f"{motion.skipped} JointState messages without joint "
                                   f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
-    events, summary.problems = layout_events(bag, layout_messages, layout_file)
+    in_force, summary.problems = layouts_in_force(bag, layout_messages, layout_file)
+    events = [(log_time, layout) for log_time, layout, _ in in_force]
     t = motion.stamp * 1e-9
     accepted, accepted_alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle,
                                                motion.omega, max_speed, time_constant,
@@ -189,9 +204,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
                          level=LEVELS.get(compression)) if output else None
     channels = _output_channels(writer) if writer else None
     if writer:
-        for log, layout in events:
-            writer.write(channels['layout'], max(int(log), 0), string_message(
-                _layout_text(layout_messages, log, layout_file)))
+        for log, _, text in in_force:
+            writer.write(channels['layout'], max(int(log), 0), string_message(text))
     bounds = [e[0] for e in events[1:]] + [np.iinfo(np.int64).max]
     done = 0
     for (start_ns, layout), end_ns in zip(events, bounds):
@@ -236,13 +250,6 @@ def _where(mask, *arrays):
     if mask.all():
         return arrays
     return tuple(a[mask] for a in arrays)
-
-
-def _layout_text(messages, log_time, layout_file):
-    if layout_file is not None:
-        with open(layout_file, encoding='utf-8') as stream:
-            return stream.read()
-    return next(text for t, text in messages if t == log_time)
 
 
 def _output_channels(writer):
