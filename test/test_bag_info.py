@@ -175,3 +175,34 @@ def test_info_of_what_is_not_a_bag_is_one_line(tmp_path):
         code, out, err = info(path)
         assert code == 2 and out == '', path
         assert len(err.splitlines()) == 1 and err.startswith(f'cvc-balance: error: {path}: ')
+
+
+def test_info_of_rosbag2s_own_bag_as_rosbag2s_own_test_expects():
+    """
+    rosbag2's file (test/data/rosbag2), against rosbag2's end-to-end test of ros2 bag info.
+
+    Its expectations (rosbag2_tests/test_rosbag2_info_end_to_end.cpp, branch jazzy): the
+    regular expression below, and two services; service events are counted apart.
+    """
+    import re
+    path = ROOT / 'test' / 'data' / 'rosbag2' / 'bag_with_topics_and_service_events.mcap'
+    code, out, err = info(path)
+    assert code == 0, err
+    assert re.search(
+        '\nFiles:             bag_with_topics_and_service_events.mcap'
+        '\nBag size:          .*B'
+        '\nStorage id:        mcap'
+        '\nROS Distro:        unknown'
+        '\nDuration:          0\\.0706.*s'
+        '\nStart:             Nov  7 2023 .*:30:36\\..* \\(1699345836\\..*\\)'
+        '\nEnd:               Nov  7 2023 .*:30:36\\..* \\(1699345836\\..*\\)'
+        '\nMessages:          2'
+        '\nTopic information: ', out), out
+    assert 'Service:           2\n' in out
+    lines = out.splitlines()
+    assert 'Service information: Service: /test_service2 | Type: test_msgs/srv/BasicTypes | ' \
+        'Event Count: 4 | Serialization Format: cdr' in lines
+    assert ' ' * 21 + 'Service: /test_service1 | Type: test_msgs/srv/BasicTypes | ' \
+        'Event Count: 4 | Serialization Format: cdr' in lines
+    assert ' ' * 19 + 'Topic: /events/write_split | Type: rosbag2_interfaces/msg/' \
+        'WriteSplitEvent | Count: 0 | Serialization Format: cdr' in lines

@@ -38,6 +38,12 @@ class TopicInfo:
     count: int
     serialization_format: str
 
+    @property
+    def service_event(self):
+        """Whether this is a service's event topic (rosbag2_cpp's is_service_event_topic)."""
+        return self.topic.endswith('/_service_event') and '/srv/' in self.msg_type and \
+            self.msg_type.endswith('_Event')
+
 
 @dataclass
 class LayoutInfo:
@@ -67,8 +73,8 @@ class BagInfo:
 
     @property
     def messages(self):
-        """Return the number of messages read."""
-        return sum(t.count for t in self.topics)
+        """Return the number of messages read, service events aside (as ros2 bag info)."""
+        return sum(t.count for t in self.topics if not t.service_event)
 
     @property
     def duration(self):
@@ -195,9 +201,15 @@ def format_info(info):
              f'End:               {moment(info.end) if info.end is not None else "none"}',
              f'Messages:          {info.messages}']
     described = [f'Topic: {t.topic} | Type: {t.msg_type} | Count: {t.count} | '
-                 f'Serialization Format: {t.serialization_format}' for t in info.topics]
+                 f'Serialization Format: {t.serialization_format}'
+                 for t in info.topics if not t.service_event]
     lines.append('Topic information: ' + f'\n{pad}'.join(described))
-    lines += ['Service:           0', 'Service information: ']
+    services = [f'Service: {t.topic.removesuffix("/_service_event")} | '
+                f'Type: {t.msg_type.removesuffix("_Event")} | Event Count: {t.count} | '
+                f'Serialization Format: {t.serialization_format}'
+                for t in info.topics if t.service_event]
+    lines += [f'Service:           {len(services)}',
+              'Service information: ' + f'\n{pad}  '.join(services)]
     lines.append(f'Machine id:        {info.machine_id or "none"}')
     layouts = [f'{layout.name} {layout.digest} from {seconds(layout.log_time)}'
                if not layout.rejected else
@@ -216,7 +228,12 @@ def info_record(info):
         'duration_ns': info.duration, 'start_ns': info.start, 'end_ns': info.end,
         'message_count': info.messages,
         'topics': [{'name': t.topic, 'type': t.msg_type, 'count': t.count,
-                    'serialization_format': t.serialization_format} for t in info.topics],
+                    'serialization_format': t.serialization_format}
+                   for t in info.topics if not t.service_event],
+        'services': [{'name': t.topic.removesuffix('/_service_event'),
+                      'type': t.msg_type.removesuffix('_Event'), 'event_count': t.count,
+                      'serialization_format': t.serialization_format}
+                     for t in info.topics if t.service_event],
         'machine_id': info.machine_id,
         'layouts': [{'log_time_ns': layout.log_time, 'name': layout.name or None,
                      'digest': layout.digest or None, 'rejected': layout.rejected or None}

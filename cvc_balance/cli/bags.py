@@ -103,6 +103,7 @@ def register(commands):
                       help='print one JSON object: path, files, bag_size (bytes), '
                       'storage_identifier, ros_distro, duration_ns, start_ns, end_ns, '
                       'message_count, topics [{name, type, count, serialization_format}], '
+                      'services [{name, type, event_count, serialization_format}], '
                       'machine_id, layouts [{log_time_ns, name, digest, rejected}], problems')
     info.set_defaults(run=_info)
 
