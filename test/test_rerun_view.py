@@ -53,13 +53,65 @@ def read_rrd(path):
 
 
 @pytest.fixture(scope='module')
-def logged(tmp_path_factory):
+def rrd(tmp_path_factory):
     out = tmp_path_factory.mktemp('rrd') / 'run.rrd'
     run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'view',
                           str(ROOT / 'bags' / 'spin_up_tube_swap.mcap'), '-o', str(out)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
-    return read_rrd(out)
+    return out
+
+
+@pytest.fixture(scope='module')
+def logged(rrd):
+    return read_rrd(rrd)
+
+
+def read_rows(path, entity, *columns):
+    """Rows of one entity's logged component ``columns``, with both timelines (ns)."""
+    rows = []
+    for chunk in RrdReader(str(path)).stream():
+        if str(chunk.entity_path) != entity:
+            continue
+        batch = chunk.to_record_batch()
+        if not set(columns) <= set(batch.schema.names):
+            continue
+        since = batch.column('since start').cast('int64').to_pylist()
+        stamps = batch.column('time').cast('int64').to_pylist()
+        values = [batch.column(c).to_pylist() for c in columns]
+        rows += [(a, b) + tuple(v) for a, b, *v in zip(since, stamps, *values)]
+    return sorted(rows, key=lambda row: row[:2])
+
+
+def test_times_are_seconds_since_the_first_sample(rrd):
+    """
+    The views' timeline counts from the run's first sample, the events say so in text.
+
+    The bag's stamps start 1 s after the epoch (the date would read 1970-01-01); its
+    layout changes at stamp 6 s, 5 s into the run (bags/spin_up_tube_swap.yaml).
+    """
+    first = min(expected_outputs(ROOT / 'bags' / 'spin_up_tube_swap.yaml')[0])
+    assert first == 1_000_000_000
+    rows = read_rows(rrd, '/events', 'TextLog:text')
+    assert rows, 'no events'
+    for since, stamp, (text,) in rows:
+        assert since == stamp - first
+        assert text.startswith(f'{since * 1e-9:6.2f} s  '), text
+    layouts = [(since, text) for since, _, (text,) in rows if ' layout ' in f' {text}']
+    assert [since for since, _ in layouts] == [0, 5_000_000_000], layouts
+    assert layouts[1][1].startswith('  5.00 s  layout ct_gantry_demo ')
+
+
+def test_the_limit_label_is_clear_of_its_circle(rrd):
+    """The red circle is the limit (radius 1): its label in a row of its own, off the ring."""
+    for key in ('plane_I', 'plane_II'):
+        rows = read_rows(rrd, f'/polar/{key}/labels', 'Points2D:labels', 'Points2D:positions')
+        assert rows
+        for _, _, labels, positions in rows:
+            (at,) = [p for text, p in zip(labels, positions) if text.startswith('limit ')]
+            # Labels hang below their point by one text row (POLAR_LINE of the limit).
+            top, bottom = math.hypot(*at), math.hypot(at[0], at[1] + 0.28)
+            assert min(top, bottom) > 1.2 or max(top, bottom) < 0.8, (key, labels, at)
 
 
 def test_entity_paths_of_every_view_exist(logged):

@@ -232,7 +232,7 @@ def _view(args):
             except ViewerError as error:
                 print(f'cvc-balance: error: {args.screenshot}: {error}', file=sys.stderr)
                 return 1
-            print(f'{args.screenshot}: the viewer at {when * 1e-9:.3f} s of the time line')
+            print(f'{args.screenshot}: the viewer {when * 1e-9:.3f} s after the first sample')
     return 0
 
 

@@ -29,7 +29,6 @@ timeline ``time`` (the samples' stamps). Every panel names its units. What it lo
 The rerun SDK is imported here only (an adapter).
 """
 
-import datetime
 import math
 from types import SimpleNamespace
 
@@ -47,7 +46,10 @@ from cvc_balance.physics.load_parts import support_load_parts
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import plane_unbalances, static_unbalance, unbalance_wrench
 
-TIMELINE = 'time'
+TIMELINE = 'since start'
+"""The timeline the views show: seconds since the run's first sample (a duration)."""
+STAMP_TIMELINE = 'time'
+"""The samples' own stamps (UTC): where the run sits in other logs (a timestamp)."""
 NEWTONS_PER_METRE = 20000.0
 """Support load arrows: 20 kN per metre of arrow."""
 UNBALANCE_NEWTONS_PER_METRE = 200.0
@@ -64,18 +66,20 @@ RESIDUAL_COLOUR = (170, 90, 220)
 """m: a 3D label this close to a more important one is left out (hover shows the name)."""
 POLAR_REACH = 1.4
 """Longest vector drawn in the polar views (fraction of the limit); its label gives more."""
-POLAR_BOUNDS = (2.0, 2.35)
-"""Half-width and half-height of the polar views (fractions of the limit)."""
+POLAR_BOUNDS = (2.0, -2.35, 2.6)
+"""Half-width, top and bottom of the polar views (fractions of the limit; Y down)."""
 POLAR_TEXT_ROW = 1.95
 """Where the polar views write the vectors' values: above and below the grid."""
+POLAR_LINE = 0.28
+"""A row of text in the polar views (fractions of the limit)."""
 
 LEVEL_COLOURS = {assessment.OK: (60, 180, 90), assessment.WARN: (245, 170, 30),
                  assessment.ERROR: (235, 60, 60), assessment.NOT_JUDGED: (140, 140, 140)}
 LOG_LEVELS = {assessment.OK: 'INFO', assessment.WARN: 'WARN', assessment.ERROR: 'ERROR',
               assessment.NOT_JUDGED: 'INFO'}
-PLANE_COLOURS = {'plane_I': (80, 170, 255), 'plane_II': (255, 120, 200),
+PLANE_COLOURS = {'plane_I': (80, 170, 255), 'plane_II': (255, 150, 220),
                  'static': (80, 170, 255)}
-MEASURED_PLANE_COLOURS = {'plane_I': (20, 90, 230), 'plane_II': (200, 30, 130),
+MEASURED_PLANE_COLOURS = {'plane_I': (20, 90, 230), 'plane_II': (190, 20, 120),
                           'static': (20, 90, 230)}
 """A plane's unbalance as the load cells measure it: its layout colour, deeper."""
 COMPONENT_COLOUR = (120, 135, 160)
@@ -84,11 +88,14 @@ CORRECTION_COLOUR = (60, 200, 90)
 LOAD_COLOUR = (255, 150, 30)
 UNBALANCE_COLOUR = (235, 60, 60)
 GRID_COLOUR = (90, 90, 100)
+PREDICTED_COLOUR = (235, 235, 235)
+"""A load cell's force as the layout predicts it, beside the measured one."""
 SUPPORT_COLOURS = ((80, 170, 255), (255, 150, 30), (180, 120, 255))
 
 
 EVENT_COLUMNS = rrb.TextLogColumns(
     timeline_columns=[rre.TimelineColumn(TIMELINE, visible=False),
+                      rre.TimelineColumn(STAMP_TIMELINE, visible=False),
                       rre.TimelineColumn('log_time', visible=False)],
     text_log_columns=[rre.TextLogColumn('EntityPath', visible=False),
                       rre.TextLogColumn('LogLevel'), rre.TextLogColumn('Body')])
@@ -101,50 +108,53 @@ def plane_keys(layout):
 
 def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
     """
-    Arrange the views: 3D and polar left, plots in the middle, verdict and events right.
+    Arrange the views: 3D and polar left, two columns of plots, verdict and events right.
 
-    ``static_range`` (N, N): the static weight plot's axis (a constant line would
-    otherwise be fitted to its rounding). ``cells``: add the load cells' plot
-    (measured against the layout's prediction).
+    The plots of the rotor's motion and verdict in one column, those of the supports in
+    the other, so that each is tall enough for its tick labels and its legend (a legend
+    taller than its plot drops entries). ``static_range`` (N, N): the static weight
+    plot's axis (a constant line would otherwise be fitted to its rounding). ``cells``:
+    a plot per support's load cell (measured against the layout's prediction).
     """
-    plots = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
-                                   '(ISO 21940-11: OK, WARN, ERROR)'),
-             rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its '
-                                'permissible share [1 = limit]',
-                                plot_legend=rrb.PlotLegend('RightBottom')),
-             rrb.TimeSeriesView(origin='plots/speed', name='speed ω [rad/s], '
-                                'acceleration α [rad/s²]', plot_legend=rrb.PlotLegend('LeftTop')),
-             rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque [N m]',
-                                plot_legend=rrb.PlotLegend('RightTop'))]
-    plots += [rrb.TimeSeriesView(origin='plots/load_rotating', name='rotating load amplitude '
-                                 'per support [N] (unbalance at speed)',
+    motion = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
+                                    '(OK, WARN, ERROR)'),
+              rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its '
+                                 'limit',
                                  plot_legend=rrb.PlotLegend('LeftTop')),
-              rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
-                                 '[N] (at rest)', plot_legend=rrb.PlotLegend('RightBottom'),
-                                 axis_y=rrb.ScalarAxis(range=list(static_range))
-                                 if static_range else None)]
+              rrb.TimeSeriesView(origin='plots/speed', name='speed ω, acceleration α',
+                                 plot_legend=rrb.PlotLegend('LeftTop')),
+              rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque [N m]',
+                                 plot_legend=rrb.PlotLegend('RightTop'))]
+    loads = [rrb.TimeSeriesView(origin='plots/load_rotating', name='rotating load per support '
+                                '[N]',
+                                plot_legend=rrb.PlotLegend('LeftTop')),
+             rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
+                                '[N]', plot_legend=rrb.PlotLegend('RightBottom'),
+                                axis_y=rrb.ScalarAxis(range=list(static_range))
+                                if static_range else None)]
     if cells:
-        plots.append(rrb.TimeSeriesView(origin='plots/cells', name='load cell x [N]: measured '
-                                        '(less its fitted zero) against the layout\'s '
-                                        'prediction', plot_legend=rrb.PlotLegend('LeftTop')))
+        loads += [rrb.TimeSeriesView(origin=f'plots/cells/{name}', name=f'{name} load cell x, less its '
+                                     'zero [N]', plot_legend=rrb.PlotLegend('LeftTop'))
+                  for name in support_names]
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
-                                y_range=[-POLAR_BOUNDS[1], POLAR_BOUNDS[1]])
+                                y_range=list(POLAR_BOUNDS[1:]))
     polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
                                visual_bounds=bounds) for key in planes]
     gantry = rrb.Spatial3DView(
-        origin='world', name='gantry, lab frame [m]; arrows: load 20 kN/m, unbalance 200 N/m',
-        eye_controls=rrb.EyeControls3D(position=[0.75, 0.55, 2.0], look_target=[0.0, -0.1, 0.0],
+        origin='world', name='gantry [m]; arrows: load 20 kN/m, unbalance 200 N/m',
+        eye_controls=rrb.EyeControls3D(position=[0.8, 0.6, 2.3], look_target=[0.0, -0.1, 0.0],
                                        eye_up=[0.0, 1.0, 0.0]),
         line_grid=rrb.LineGrid3D(visible=True, spacing=0.25,
                                  plane=rr.components.Plane3D([0.0, 1.0, 0.0], -1.0)))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(gantry, rrb.Horizontal(*polar), row_shares=[3, 2]),
-            rrb.Vertical(*plots, row_shares=[3] + [4] * (len(plots) - 1)),
+            rrb.Vertical(*motion, row_shares=[2, 5, 4, 4]),
+            rrb.Vertical(*loads),
             rrb.Vertical(rrb.TextDocumentView(origin='verdict', name='verdict'),
                          rrb.TextLogView(origin='events', name='events', columns=EVENT_COLUMNS),
                          row_shares=[3, 2]),
-            column_shares=[5, 5, 3]),
+            column_shares=[4, 3, 3, 3]),
         rrb.TimePanel(timeline=TIMELINE, state='collapsed'),
         rrb.BlueprintPanel(state='collapsed'), rrb.SelectionPanel(state='collapsed'))
 
@@ -188,6 +198,7 @@ class RunLogger:
         self._static_range = None      # N, the static weight plot's axis
         self._static_logged = False
         self._time_ns = 0
+        self._origin_ns = None        # the run's first stamp: 0 s on the views' timeline
         self._warnings, self._changes = (), {}
         self._cells = False
 
@@ -228,7 +239,7 @@ class RunLogger:
             self._supports += new
             self._planes = planes
             if outside:
-                low, high = 0.75 * lightest, 1.15 * heaviest
+                low, high = 0.0, 1.2 * heaviest
                 self._static_range = (low, high) if shown is None else \
                     (min(low, shown[0]), max(high, shown[1]))
             rec.send_blueprint(blueprint(self._supports, planes, self._static_range,
@@ -238,7 +249,7 @@ class RunLogger:
         # The verdict is the full model's (replay --tolerance may hand a reduced one).
         self._full = model if model.own_inertia else RotorModel.from_layout(layout)
         self._top_speed = self._drawn_top = 0.0
-        rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        self._at(time_ns)
         axis, angle = stator_tilt(layout.gravity)
         rec.log('world/stator', rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=axis, radians=angle)))
@@ -280,7 +291,7 @@ class RunLogger:
                                        ('plots/speed/alpha', 'α [rad/s²]', (255, 200, 60)),
                                        ('plots/drive_torque', 'drive torque [N m]',
                                         (200, 120, 255)),
-                                       ('plots/unbalance/limit', 'limit (1.0)',
+                                       ('plots/unbalance/limit', 'limit',
                                         LEVEL_COLOURS[assessment.ERROR])):
                 rec.log(path, rr.SeriesLines(names=[name], colors=[colour], widths=[2.0]),
                         static=True)
@@ -288,10 +299,10 @@ class RunLogger:
             label = 'static' if key == 'static' else f'plane {key[6:]}'
             # The load cells' (drawn when they can tell) deeper and thicker than the layout's.
             rec.log(f'plots/unbalance/{key}', rr.SeriesLines(
-                names=[f'{label} layout [U / permissible]'], colors=[PLANE_COLOURS[key]],
+                names=[f'{label}, layout'], colors=[PLANE_COLOURS[key]],
                 widths=[2.0]), static=True)
             rec.log(f'plots/unbalance/measured_{key}', rr.SeriesLines(
-                names=[f'{label} measured [U / permissible]'],
+                names=[f'{label}, measured'],
                 colors=[MEASURED_PLANE_COLOURS[key]], widths=[3.0]), static=True)
             rec.log(f'polar/{key}/grid', _polar_grid(), static=True)
             rec.log(f'polar/{key}/grid_labels', _polar_grid_labels(), static=True)
@@ -364,14 +375,32 @@ class RunLogger:
             if before is None or now is None or abs(now - before) <= 0.03 * abs(before):
                 return
         self._time_ns = time_ns
-        self.rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        self._at(time_ns)
         self._judge(self._top_speed)
 
+    def _since_start(self, stamp_ns):
+        """Return s since the run's first stamp (ns); the first stamp seen is the start."""
+        stamp_ns = np.asarray(stamp_ns, np.int64)
+        if self._origin_ns is None and stamp_ns.size:
+            self._origin_ns = int(stamp_ns.min())
+        return (stamp_ns - (self._origin_ns or 0)) * 1e-9
+
+    def _at(self, stamp_ns):
+        """Log what follows at the stamp ``stamp_ns`` (ns), on both timelines."""
+        self.rec.set_time(TIMELINE, duration=float(self._since_start(stamp_ns)))
+        self.rec.set_time(STAMP_TIMELINE, timestamp=stamp_ns * 1e-9)
+
+    def _columns(self, stamp_ns):
+        """Return the time columns of samples stamped ``stamp_ns`` (ns): both timelines."""
+        stamp_ns = np.asarray(stamp_ns, np.int64)
+        return [rr.TimeColumn(TIMELINE, duration=self._since_start(stamp_ns)),
+                rr.TimeColumn(STAMP_TIMELINE, timestamp=stamp_ns * 1e-9)]
+
     def _event(self, text, level, colour=None):
-        """Log an events line, its time first (the time column would take the width)."""
-        clock = datetime.datetime.fromtimestamp(self._time_ns * 1e-9, datetime.timezone.utc)
-        self.rec.log('events', rr.TextLog(f"{clock.strftime('%H:%M:%S.%f')[:11]}  {text}",
-                                          level=level, color=colour))
+        """Log an events line, its time since the start first (a column would take width)."""
+        since = float(self._since_start(self._time_ns))
+        self.rec.log('events', rr.TextLog(f'{since:6.2f} s  {text}', level=level,
+                                          color=colour))
 
     def _verdict_text(self, verdict, record=None):
         """
@@ -462,22 +491,26 @@ class RunLogger:
         rec.log(f'polar/{key}/vectors', rr.Arrows2D(origins=[[0.0, 0.0]] * len(vectors),
                                                     vectors=vectors, colors=colours,
                                                     radii=0.025))
-        # Labels apart: the vectors' values above and below the grid (in their colours),
-        # each ring's label a quarter turn away from both vectors.
-        positions = [[0.0, -POLAR_TEXT_ROW - 0.15]]    # labels hang below their point
-        texts = [f'U {amount:,.0f} g mm at {degrees_360(angle):.0f}° = {fraction:.2f}']
+        # Labels apart, in rows of their own above and below the grid (in their colours):
+        # the unbalance above, the limit (the red circle's size, which a label on the
+        # circle would have printed over) and the correction below; the 0.5 ring's label
+        # on the diagonal most across the vectors' line, clear of the angle labels.
+        positions = [[0.0, -POLAR_TEXT_ROW - 0.15],    # labels hang below their point
+                     [0.0, POLAR_TEXT_ROW]]
+        texts = [f'U {amount:,.0f} g mm at {degrees_360(angle):.0f}° = {fraction:.2f}',
+                 f'limit (red circle) {allowed:,.0f} g mm']
+        shades = [colour, LEVEL_COLOURS[assessment.ERROR]]
         if correction is not None:
-            positions.append([0.0, POLAR_TEXT_ROW])
+            positions.append([0.0, POLAR_TEXT_ROW + POLAR_LINE])
             texts.append(correction)
-        # The rings' labels on the diagonal most across the vectors' line, clear of
-        # the angle labels at 0, 90, 180 and 270 deg.
+            shades.append(CORRECTION_COLOUR)
         across = max((math.pi / 4 + k * math.pi / 2 for k in range(4)),
                      key=lambda d: abs(math.sin(d - angle)) - 1e-9 * d)
-        positions += [at(1.0, across), at(0.5, across + math.pi)]
-        texts += [f'limit {allowed:,.0f} g mm', '0.5']
+        positions.append(at(0.5, across + math.pi))
+        texts.append('0.5')
         rec.log(f'polar/{key}/labels', rr.Points2D(
             positions, radii=0.0, labels=texts, show_labels=True,
-            colors=colours + [LEVEL_COLOURS[assessment.ERROR], (160, 160, 170)]))
+            colors=shades + [(160, 160, 170)]))
 
     # -- load cells ---------------------------------------------------------------------
 
@@ -491,16 +524,17 @@ class RunLogger:
             self._cells = True
             self.rec.send_blueprint(blueprint(self._supports, self._planes or PLANES,
                                               self._static_range, True))
-        times = rr.TimeColumn(TIMELINE, timestamp=np.asarray(stamp_ns) * 1e-9)
+        times = self._columns(stamp_ns)
         index = self._supports.index(support) if support in self._supports else 0
         colour = SUPPORT_COLOURS[index % len(SUPPORT_COLOURS)]
         for kind, values in (('measured', measured_x), ('predicted', predicted_x)):
-            # The layout's prediction paler and thinner, in the support's colour.
-            shade = colour if kind == 'measured' else tuple((c + 255) // 2 for c in colour)
+            # Measured in the support's colour, the layout's prediction in white: one plot
+            # per support, so no two of its lines share a hue.
             self.rec.log(f'plots/cells/{support}/{kind}', rr.SeriesLines(
-                names=[f'{support} {kind} [N]'], colors=[shade],
-                widths=[1.5 if kind == 'measured' else 2.5]), static=True)
-            rr.send_columns(f'plots/cells/{support}/{kind}', indexes=[times],
+                names=['measured' if kind == 'measured' else 'layout\'s prediction'],
+                colors=[colour if kind == 'measured' else PREDICTED_COLOUR],
+                widths=[1.5 if kind == 'measured' else 2.0]), static=True)
+            rr.send_columns(f'plots/cells/{support}/{kind}', indexes=times,
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
                             recording=self.rec)
 
@@ -519,7 +553,7 @@ class RunLogger:
             return
         rec = self.rec
         self._time_ns = time_ns
-        rec.set_time(TIMELINE, timestamp=time_ns * 1e-9)
+        self._at(time_ns)
         allowed = verdict.assessment.plane_permissible
         planes = PLANES      # residual.planes is empty without correction planes
         for key, (_, off), share in zip(planes, residual.planes, allowed):
@@ -565,7 +599,7 @@ class RunLogger:
         if self._pending is not None and len(stamp_ns):
             self.layout(int(stamp_ns[0]), self._pending)
         model, rec = self._model, self.rec
-        times = rr.TimeColumn(TIMELINE, timestamp=stamp_ns * 1e-9)
+        times = self._columns(stamp_ns)
         n = len(omega)
         scalars = {'plots/speed/omega': omega, 'plots/speed/alpha': alpha,
                    'plots/drive_torque': result.drive_torque,
@@ -583,13 +617,13 @@ class RunLogger:
             for key, fraction in zip(self._planes, record.measured.assessment.fractions):
                 scalars[f'plots/unbalance/measured_{key}'] = np.full(n, fraction)
         for path, values in scalars.items():
-            rr.send_columns(path, indexes=[times],
+            rr.send_columns(path, indexes=times,
                             columns=rr.Scalars.columns(scalars=np.asarray(values, float)),
                             recording=rec)
         half = 0.5 * np.asarray(angle, float)
         quaternions = np.zeros((n, 4))
         quaternions[:, 2], quaternions[:, 3] = np.sin(half), np.cos(half)
-        rr.send_columns('world/stator/rotor', indexes=[times],
+        rr.send_columns('world/stator/rotor', indexes=times,
                         columns=rr.Transform3D.columns(quaternion=quaternions), recording=rec)
         if n and model.layout.balancing.service_speed is None:
             self._follow_top_speed(stamp_ns, top)
@@ -616,7 +650,7 @@ class RunLogger:
         steps = np.nonzero(np.diff(np.concatenate([[self._level_code], code])))[0]
         for k in steps.tolist():
             self._time_ns = int(stamp_ns[k])
-            self.rec.set_time(TIMELINE, timestamp=self._time_ns * 1e-9)
+            self._at(self._time_ns)
             self._judge(float(top[k]))
         self._level_code = int(code[-1])
         self._top_speed = float(top[-1])
@@ -627,7 +661,7 @@ class RunLogger:
                 break
             self._drawn_top = float(top[k])
             self._time_ns = int(stamp_ns[k])
-            self.rec.set_time(TIMELINE, timestamp=self._time_ns * 1e-9)
+            self._at(self._time_ns)
             self._judge(self._drawn_top, quiet=True)
 
     def _arrows(self, stamp_ns, omega, result, every):
@@ -637,7 +671,7 @@ class RunLogger:
         com = [0.0, 0.0, model.s_z / model.mass]
         origins = [[0.0, 0.0, s.z] for s in model.supports]
         for k in range(0, len(omega), every):
-            rec.set_time(TIMELINE, timestamp=int(stamp_ns[k]) * 1e-9)
+            self._at(int(stamp_ns[k]))
             forces = [result.support_force[s.name][k] for s in model.supports]
             rec.log('world/stator/loads', rr.Arrows3D(
                 origins=origins, vectors=[_arrow(f, NEWTONS_PER_METRE) for f in forces],

@@ -124,7 +124,7 @@ class HeadlessViewer:
             time.sleep(0.1)
 
     def timeline(self):
-        """(first, last) time of the run's timeline, ns."""
+        """(first, last) time of the run's timeline, ns since the run's first sample."""
         for recording in self.client.get_state().recordings:
             for line in recording.timelines:
                 if line.name == TIMELINE:
@@ -135,11 +135,12 @@ class HeadlessViewer:
         """
         Put the time cursor ``seconds`` after the run's first sample, paused.
 
-        None: at the last sample. Returns the cursor's time, ns on the timeline.
+        None: at the last sample. Returns the cursor's time, ns since the first sample
+        (the timeline's 0: the load cells' readings may start before it).
         """
-        start, end = self.timeline()
-        when = end if seconds is None else start + round(seconds * 1e9)
-        self.client.set_time(TIMELINE, timestamp=when * 1e-9, play_state='paused')
+        _, end = self.timeline()
+        when = end if seconds is None else round(seconds * 1e9)
+        self.client.set_time(TIMELINE, duration=np.timedelta64(when, 'ns'), play_state='paused')
         return when
 
     def views(self):
