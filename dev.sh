@@ -4,7 +4,7 @@
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
-#   ./dev.sh screenshot  regenerate docs/viewer.png (the rerun viewer headless, at 6.5 s of the bag)
+#   ./dev.sh pictures [NAME ...]  make every picture the docs show again (docs/pictures.md)
 #   ./dev.sh docs      build the documentation site (Sphinx, warnings as errors); prints index.html
 #   ./dev.sh bags      make the bundled bags again from their scenarios (bags/X.yaml -> bags/X.mcap)
 set -euo pipefail
@@ -138,17 +138,27 @@ node_readers() {
   fi
 }
 
-screenshot() {
-  # The rerun viewer on the bundled tube-swap bag, rendered headless (Mesa's Vulkan
-  # drivers), its time cursor set to 6.5 s after the first sample: after the tube swap,
-  # at service speed. Analytics off in the viewer's private config folder.
-  vulkan
-  local work
-  work="$(mktemp -d)"
-  mkdir -p "$here/docs"
-  in_venv cvc-balance view "$here/bags/spin_up_tube_swap.mcap" -o "$work/run.rrd" \
-    --screenshot "$here/docs/viewer.png" --at 6.5
-  rm -rf "$work"
+chromium_browser() {
+  # The report's pictures and its browser test: Debian's Chromium, headless.
+  if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then
+    return 0
+  fi
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    echo "dev.sh: installing chromium (the report's pictures and browser test)" >&2
+    apt-get update -qq && apt-get install -y -qq chromium >/dev/null
+    return $?
+  fi
+  echo "dev.sh: chromium is missing and cannot be installed here (needs root and apt-get)" >&2
+  return 1
+}
+
+pictures() {
+  # Every picture the README and docs show, from bags/ and config/ only (docs/pictures.py):
+  # the rerun viewer headless (Mesa's Vulkan drivers), the report in Chromium, the charts;
+  # then docs/pictures.json (what each was made from) and docs/pictures.md.
+  vulkan || echo "dev.sh: the viewer's picture will fail without them" >&2
+  chromium_browser || echo "dev.sh: the report's picture will fail without it" >&2
+  cd "$here" && in_venv python docs/pictures.py "$@"
 }
 
 docs() {
@@ -179,14 +189,18 @@ case "$cmd" in
     setup
     vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
     node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
+    chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
     colcon_check
     cd "$here" && in_venv python -m pytest "$@" ;;
   run)
     setup
     in_venv "$@" ;;
-  screenshot)
+  pictures)
     setup
-    screenshot ;;
+    pictures "$@" ;;
+  screenshot)       # the viewer's picture alone (its old name)
+    setup
+    pictures viewer ;;
   docs)
     setup
     docs ;;

@@ -10,7 +10,8 @@ Identification from load cells: accuracy against window and noise, and its cost.
 2. Cost: the live fit's time per reading (SlidingFit.reading, plain Python), its motion
    update, and the offline fit's readings/s (vectorised), best of several runs.
 
-Run: ./dev.sh run python benchmarks/identify.py [--quick]
+Run: ./dev.sh run python benchmarks/identify.py [--quick] [--no-cost]
+(``./dev.sh pictures identify_accuracy`` makes the chart with --no-cost.)
 """
 
 import argparse
@@ -162,12 +163,16 @@ def main():
     """Print the figures (and write the chart)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--quick', action='store_true', help='fewer seeds and windows')
+    parser.add_argument('--no-cost', action='store_true',
+                        help='the accuracy and its chart only (seeded: the same every run)')
     parser.add_argument('--png', default=str(ROOT / 'docs' / 'identify_accuracy.png'))
     args = parser.parse_args()
-    reading, motion = live_cost()
-    print(f'live fit: {reading:.2f} us per cell reading, {motion:.2f} us per motion sample')
-    rate, n = offline_rate()
-    print(f'offline fit: {rate / 1e6:.2f} M readings/s ({n} readings)')
+    if not args.no_cost:
+        reading, motion = live_cost()
+        print(f'live fit: {reading:.2f} us per cell reading, {motion:.2f} us per motion '
+              'sample')
+        rate, n = offline_rate()
+        print(f'offline fit: {rate / 1e6:.2f} M readings/s ({n} readings)')
     windows = [2, 5, 20] if args.quick else [2, 5, 10, 20, 50]
     seeds = 8 if args.quick else 30
     table = accuracy(windows, [5.0, 15.0, 50.0], seeds)

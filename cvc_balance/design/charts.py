@@ -1,15 +1,15 @@
 """
 Charts of a sweep (:mod:`cvc_balance.design.sweep`): the design package's only matplotlib.
 
-One parameter: the judged planes' unbalance (g mm) with the grade's band and,
-beside it, the first balance point's neighbourhood (the band is narrow there:
-the thesis's point),
+One parameter: the judged planes' unbalance (g mm) with the grade's band (on a
+log axis when the band is under a twentieth of the largest unbalance: on a linear
+one it would be a hairline at the bottom) and, beside it, the first balance
+point's neighbourhood (the band is narrow there: the thesis's point),
 the supports' unbalance loads and the resultant F_res (N), and, asked for,
 the derivative of F_res: the norm's one-sided slope (which jumps at balance,
 thesis Figs. 4.3, 4.4, 4.7, 4.8) beside the vector's components (smooth).
 Two parameters: contour maps of the worse plane's unbalance with the
-within-grade region outlined, and of F_res (thesis Figs. 4.2, 4.6). Balance
-points are marked. Angles in degrees, other parameters in SI units.
+within-grade region outlined, and of F_res (thesis Figs. 4.2, 4.6). Balance points are marked. Angles in degrees, other parameters in SI units.
 """
 
 import math
@@ -21,6 +21,10 @@ import numpy as np  # noqa: E402
 
 G_MM = 1e6
 """g mm per kg m."""
+BAND = (0.15, 0.85, 0.15, 0.18)
+"""The within-grade band: green, light enough for the lines over it."""
+LOG_BELOW = 0.05
+"""A grade band under this fraction of the largest unbalance is drawn on a log axis."""
 PLANE_NAMES = ('plane I', 'plane II')
 COLOURS = ('tab:blue', 'tab:orange', 'tab:green', 'tab:red')
 
@@ -39,13 +43,19 @@ def axis_label(parameter):
 
 def draw_sweep(result, path, derivative=False, title=None):
     """Draw ``result`` (a Sweep) to the PNG file ``path``."""
+    figure = sweep_figure(result, derivative, title)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def sweep_figure(result, derivative=False, title=None):
+    """Return the figure of ``result`` (a Sweep), drawn; the caller closes it."""
     if len(result.parameters) == 1:
         figure = _one_parameter(result, derivative)
     else:
         figure = _two_parameters(result)
     figure.suptitle(title or _title(result), fontsize=11)
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
+    return figure
 
 
 def _title(result):
@@ -80,10 +90,9 @@ def _one_parameter(result, derivative):
     for i, label in enumerate(_plane_labels(result)):
         top.plot(x, amounts[:, i], color=COLOURS[i], label=label,
                  linestyle='-' if i == 0 else '--')
-    _grade_band(top, result)
+    bottom = _unbalance_axis(top, result, amounts)
+    _grade_band(top, result, bottom)
     _mark_points(top, result, parameter)
-    top.set_ylabel('unbalance [g mm]')
-    top.set_ylim(bottom=0.0)
     top.legend(loc='upper right', fontsize=8)
     top.grid(alpha=0.3)
     if zoom:
@@ -138,12 +147,32 @@ def _derivative(ax, result, x, parameter):
     ax.grid(alpha=0.3)
 
 
-def _grade_band(ax, result):
+def _unbalance_axis(ax, result, amounts):
+    """
+    Scale the unbalance axis so the grade's band can be seen; return its bottom (g mm).
+
+    Linear from 0 while the band is a twentieth of the largest unbalance or more; else
+    logarithmic from a decade under the band's top (a balance point dips out of sight
+    at the bottom: its exact zero has no logarithm).
+    """
+    largest = float(np.max(amounts))
+    if result.permissible is None or largest <= 0.0 or \
+            float(np.min(result.permissible)) * G_MM >= LOG_BELOW * largest:
+        ax.set_ylabel('unbalance [g mm]')
+        ax.set_ylim(bottom=0.0)
+        return 0.0
+    bottom = 0.1 * float(np.min(result.permissible)) * G_MM
+    ax.set_yscale('log')
+    ax.set_ylim(bottom, 2.0 * max(largest, float(np.max(result.permissible)) * G_MM))
+    ax.set_ylabel('unbalance [g mm], log scale')
+    return bottom
+
+
+def _grade_band(ax, result, bottom=0.0):
     if result.permissible is None:
         return
     allowed = result.permissible * G_MM
-    ax.axhspan(0.0, float(np.min(allowed)), color='tab:green', alpha=0.15,
-               label=f'within G {result.grade:g}')
+    ax.axhspan(bottom, float(np.min(allowed)), color=BAND, label=f'within G {result.grade:g}')
     for i, value in enumerate(allowed):
         ax.axhline(value, color=COLOURS[i], linewidth=0.8, linestyle=':')
 
@@ -157,7 +186,8 @@ def _mark_points(ax, result, parameter, label=True):
             kind = 'balance' if point.balanced else 'least unbalance'
             unit = 'deg' if parameter.name == 'angle' else ''
             ax.annotate(f'{kind} at {value:.6g} {unit}'.strip(), (value, 0.0),
-                        xytext=(4, 6), textcoords='offset points', fontsize=8,
+                        xycoords=('data', 'axes fraction'), xytext=(4, 6),
+                        textcoords='offset points', fontsize=8,
                         color='red' if point.balanced else 'dimgrey')
 
 
@@ -189,7 +219,7 @@ def _zoom(ax, result, parameter, point, index, half):
                           base[1] + slope[1] * (local - centre))
         ax.plot(axis_values(parameter, local), values, color=COLOURS[k],
                 linestyle='-' if k == 0 else '--')
-    ax.axhspan(0.0, float(np.min(result.permissible)) * G_MM, color='tab:green', alpha=0.15)
+    ax.axhspan(0.0, float(np.min(result.permissible)) * G_MM, color=BAND)
     for k, value in enumerate(result.permissible * G_MM):
         ax.axhline(value, color=COLOURS[k], linewidth=0.8, linestyle=':')
     ax.set_ylim(0.0, 3.0 * allowed)

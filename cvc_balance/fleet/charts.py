@@ -2,8 +2,8 @@
 The trends as pictures (PNG, matplotlib without pyplot's global state).
 
 Per machine (:func:`machine_chart`): one panel per correction plane, its unbalance per run
-(g mm; identified from the load cells, with their 95 % bars, or the layout's, hollow),
-its permissible share of the grade (red, stepping where a layout change moves it), the
+(g mm, as its drift is in g mm a day; identified from the load cells, with their 95 % bars,
+or the layout's, hollow), its permissible share of the grade (red, stepping where a layout change moves it), the
 fitted drift of each layout epoch and its projection with the 95 % band up to the
 projected date of leaving the grade (shaded: its interval), and each layout change
 (grey, labelled with its step). For the fleet (:func:`fleet_chart`): the most urgent
@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.dates import AutoDateLocator, ConciseDateFormatter, date2num
 from matplotlib.figure import Figure
+from matplotlib.ticker import StrMethodFormatter
 
 from cvc_balance.fleet.trends import DAY_NS, LEAVES, OUT
 
@@ -34,7 +35,7 @@ def _dates(ns):
 
 
 def machine_chart(trend, path):
-    """Draw one machine's trends (see the module's description) to the PNG ``path``."""
+    """Draw one machine's trends (see the module's description) to ``path``; its Figure."""
     planes = trend.planes
     figure = Figure(figsize=(9.0, 2.9 * max(len(planes), 1) + 0.6), dpi=110)
     FigureCanvasAgg(figure)
@@ -52,6 +53,7 @@ def machine_chart(trend, path):
     axes[-1].xaxis.set_major_formatter(ConciseDateFormatter(locator))
     figure.tight_layout()
     figure.savefig(path)
+    return figure
 
 
 def _end(plane):
@@ -64,30 +66,29 @@ def _end(plane):
 
 
 def _plane(ax, plane, trend, chart_end):
+    """One plane's panel, in g mm throughout: its axis, its drift (per day) and its steps."""
     when = _dates(plane.times)
-    kilo = 1e-3
     ident = plane.identified
-    ax.errorbar(when[ident], plane.amount[ident] * kilo,
-                yerr=np.nan_to_num(plane.ci95[ident]) * kilo, fmt='o', color=BLUE, ms=4,
-                capsize=2, label='identified (load cells), 95 %')
+    ax.errorbar(when[ident], plane.amount[ident], yerr=np.nan_to_num(plane.ci95[ident]),
+                fmt='o', color=BLUE, ms=4, capsize=2, label='identified (load cells), 95 %')
     if (~ident).any():
-        ax.plot(when[~ident], plane.amount[~ident] * kilo, 'o', mfc='none', color=BLUE,
+        ax.plot(when[~ident], plane.amount[~ident], 'o', mfc='none', color=BLUE,
                 label="layout's")
     end = _end(plane)
     steps = np.concatenate([plane.times, [max(chart_end, int(plane.times[-1]))]])
-    ax.step(_dates(steps), np.concatenate([plane.permissible, plane.permissible[-1:]]) * kilo,
+    ax.step(_dates(steps), np.concatenate([plane.permissible, plane.permissible[-1:]]),
             where='post', color=RED, lw=1.5, label=f'permissible (G {trend.grade:g})')
     if plane.levels is not None:
         for k in range(len(plane.levels)):
             inside = plane.times[plane.epoch == k]
             span = np.linspace(inside[0], inside[-1], 20)
-            ax.plot(_dates(span), plane.line(span, k) * kilo, color='black', lw=1)
+            ax.plot(_dates(span), plane.line(span, k), color='black', lw=1)
         if plane.status == LEAVES:
             ahead = np.linspace(plane.times[-1], end, 200)
             line, half = plane.line(ahead), plane.band(ahead)
-            ax.plot(_dates(ahead), line * kilo, '--', color='black', lw=1,
+            ax.plot(_dates(ahead), line, '--', color='black', lw=1,
                     label=f'drift {plane.drift:+.0f} +- {plane.drift_ci95:.0f} g mm/day')
-            ax.fill_between(_dates(ahead), (line - half) * kilo, (line + half) * kilo,
+            ax.fill_between(_dates(ahead), line - half, line + half,
                             color='black', alpha=0.1, lw=0)
             latest = plane.leaves_latest or (plane.leaves + timedelta(days=30))
             ax.axvspan(date2num(plane.leaves_earliest), date2num(latest), color=RED,
@@ -100,16 +101,17 @@ def _plane(ax, plane, trend, chart_end):
         step = change.steps.get(plane.plane)
         ax.axvline(date2num(change.when), color=GREY, ls='--', lw=1)
         if step is not None and np.isfinite(step[0]):
-            ax.annotate(f'layout change: {step[0] * kilo:+.0f} +- {step[1] * kilo:.0f}',
+            ax.annotate(f'layout change: {step[0]:+,.0f} +- {step[1]:,.0f} g mm',
                         (date2num(change.when), 0.97), xycoords=('data', 'axes fraction'),
-                        ha='left', va='top', fontsize=7, color=GREY, rotation=0,
+                        ha='left', va='top', fontsize=8, color=GREY, rotation=0,
                         xytext=(3, 0), textcoords='offset points')
     status = plane.status + (f' {plane.leaves:%Y-%m-%d}' if plane.leaves else '')
-    ax.set_title(f'plane {plane.plane}: {status}', fontsize=9, loc='left')
-    ax.set_ylabel('unbalance [kg mm]')
+    ax.set_title(f'plane {plane.plane}: {status}', fontsize=10, loc='left')
+    ax.set_ylabel('unbalance [g mm]')
+    ax.yaxis.set_major_formatter(StrMethodFormatter('{x:,.0f}'))
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc='best', framealpha=0.8)
+    ax.legend(fontsize=8, loc='best', framealpha=0.8)
 
 
 def fleet_chart(trends, path, most=30):
