@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def rgb(figure):
-    """The figure's pixels, (h, w, 3), row 0 at the top."""
+    """Return the figure's pixels, (h, w, 3), row 0 at the top."""
     figure.canvas.draw()
     return np.asarray(figure.canvas.buffer_rgba())[..., :3].astype(int)
 

@@ -415,6 +415,7 @@ class ReportParser(HTMLParser):
         super().__init__()
         self.images, self.boxes, self.cells, self.ids, self.text = [], [], [], [], []
         self._in_verdict = self._in_cell = False
+        self._depth = 0          # divs open inside the verdict's
 
     def handle_starttag(self, tag, attrs):
         attrs = dict(attrs)
@@ -423,15 +424,21 @@ class ReportParser(HTMLParser):
         if tag == 'img':
             self.images.append(attrs['src'])
         if tag == 'div' and attrs.get('id') == 'verdict':
-            self._in_verdict = True
+            self._in_verdict, self._depth = True, 0
         elif tag == 'div' and self._in_verdict:
-            self.boxes.append(attrs.get('class'))
+            self._depth += 1
+            if self._depth == 1:
+                self.boxes.append(attrs.get('class'))
         if tag == 'td':
             self._in_cell = True
 
     def handle_endtag(self, tag):
         if tag == 'td':
             self._in_cell = False
+        if tag == 'div' and self._in_verdict:
+            if self._depth == 0:
+                self._in_verdict = False
+            self._depth -= 1
 
     def handle_data(self, data):
         self.text.append(data)

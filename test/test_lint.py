@@ -8,7 +8,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [str(ROOT / 'cvc_balance'), str(ROOT / 'test'), str(ROOT / 'benchmarks'),
-           str(ROOT / 'setup.py'), str(ROOT / 'docs' / 'conf.py'), str(ROOT / 'docs' / '_ext')]
+           str(ROOT / 'setup.py'), str(ROOT / 'docs' / 'conf.py'), str(ROOT / 'docs' / '_ext'),
+           str(ROOT / 'docs' / 'pictures.py')]
 
 
 @pytest.mark.linter

@@ -92,7 +92,7 @@ def by_class(pictures, kind):
 
 
 def first_motion_stamp_ns():
-    """The bag's first joint state stamp, by the mcap library (a second reader)."""
+    """Return the bag's first joint state stamp, by the mcap library (a second reader)."""
     from mcap_ros2.decoder import DecoderFactory
     from mcap.reader import make_reader
     with open(BAG, 'rb') as stream:
@@ -182,7 +182,7 @@ def test_every_legend_lists_every_series(pictures):
 
 
 def text_marks(mask, gap=8, least=4):
-    """Runs of True along an axis (a label's glyphs, ``gap`` apart at most), ``least`` long."""
+    """Return the runs of True (a label's glyphs, ``gap`` apart at most), ``least`` long."""
     found = np.nonzero(mask)[0]
     runs = []
     for k in found.tolist():

@@ -746,9 +746,12 @@ def summarise(result, record=None):
         'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
     }
     if result.method == 'influence coefficients':
+        # The sensors' coefficients only: the grade's limits ride along as channels of
+        # weight 0 (each plane's unbalance, moved one to one), which no sensor measured.
+        sensors = [k for k, weight in enumerate(problem.weights) if weight > 0.0]
         summary['coefficients'] = {
-            'sensors': list(problem.channels), 'planes': list(problem.planes),
-            'values': [[_polar(v) for v in row] for row in problem.influence],
+            'sensors': [problem.channels[k] for k in sensors], 'planes': list(problem.planes),
+            'values': [[_polar(v) for v in problem.influence[k]] for k in sensors],
             'condition_number': record.get('condition_number') if record else None,
             'reading_units': record.get('reading_units') if record else None,
             'runs': [{k: r.get(k) for k in ('role', 'bag', 'date', 'speed')}

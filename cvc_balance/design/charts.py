@@ -9,7 +9,8 @@ the supports' unbalance loads and the resultant F_res (N), and, asked for,
 the derivative of F_res: the norm's one-sided slope (which jumps at balance,
 thesis Figs. 4.3, 4.4, 4.7, 4.8) beside the vector's components (smooth).
 Two parameters: contour maps of the worse plane's unbalance with the
-within-grade region outlined, and of F_res (thesis Figs. 4.2, 4.6). Balance points are marked. Angles in degrees, other parameters in SI units.
+within-grade region outlined, and of F_res (thesis Figs. 4.2, 4.6). Balance
+points are marked. Angles in degrees, other parameters in SI units.
 """
 
 import math

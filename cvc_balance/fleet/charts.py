@@ -3,10 +3,10 @@ The trends as pictures (PNG, matplotlib without pyplot's global state).
 
 Per machine (:func:`machine_chart`): one panel per correction plane, its unbalance per run
 (g mm, as its drift is in g mm a day; identified from the load cells, with their 95 % bars,
-or the layout's, hollow), its permissible share of the grade (red, stepping where a layout change moves it), the
-fitted drift of each layout epoch and its projection with the 95 % band up to the
-projected date of leaving the grade (shaded: its interval), and each layout change
-(grey, labelled with its step). For the fleet (:func:`fleet_chart`): the most urgent
+or the layout's, hollow), its permissible share of the grade (red, stepping where a layout
+change moves it), the fitted drift of each layout epoch and its projection with the 95 %
+band up to the projected date of leaving the grade (shaded: its interval), and each layout
+change (grey, labelled with its step). For the fleet (:func:`fleet_chart`): the most urgent
 machines, each a bar to its projected date with the interval, those out of grade now
 in red at the left.
 """

@@ -10,16 +10,24 @@ import math
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import StrMethodFormatter
 import numpy as np
 
 BEFORE, AFTER, MEASURED, WEIGHT = '#c62828', '#2e7d32', '#1565c0', '#ef6c00'
 DPI = 100
+WIDTH = 5.0
+"""in: every figure's width. The page shows two side by side (about 465 CSS pixels each,
+0.93 of its 500 pixels) or, on a phone, one across (about 364, 0.73 of them): the text
+sizes below are then 11.6 CSS pixels or more, and 9.1 or more on a phone."""
+TEXT, SMALL = 10.0, 9.0
+"""pt: legends, labels and annotations; tick labels."""
 
 
 def _save(figure, path):
+    """Write the figure as a PNG; return it (drawn, for reading back what it shows)."""
     FigureCanvasAgg(figure)
     figure.savefig(path, dpi=DPI)
-    return path
+    return figure
 
 
 def _vector(entry):
@@ -40,7 +48,7 @@ def plane_figure(summary, plane_index, path):
     plane = summary['planes'][plane_index]
     name = plane['name']
     plan = _recommended(summary)
-    figure = Figure(figsize=(5.6, 5.8))
+    figure = Figure(figsize=(WIDTH, 6.0))
     axes = figure.add_subplot(projection='polar')
     grade = summary['grade']
     weights = [w for w in plan['weights'] if w['plane'] == name]
@@ -99,7 +107,7 @@ def plane_figure(summary, plane_index, path):
         axes.plot([theta], [ring], 'o', color=WEIGHT, ms=10, mec='black', mew=0.6)
         label = ' + '.join(f'{m * 1000:g}' for m in w['masses']) + ' g'
         axes.annotate(label, (theta, ring), xytext=(theta, ring * 0.84), ha='center',
-                      va='center', fontsize=9, weight='bold',
+                      va='center', fontsize=TEXT, weight='bold',
                       bbox={'boxstyle': 'round,pad=0.2', 'fc': 'white', 'ec': WEIGHT})
         drawn.append(theta)
     axes.plot([], [], 'o', color=WEIGHT, mec='black',
@@ -110,10 +118,12 @@ def plane_figure(summary, plane_index, path):
     clearance = [min([abs(math.remainder(c - d, 2.0 * math.pi)) for d in drawn] or [math.pi])
                  for c in candidates]
     axes.set_rlabel_position(math.degrees(candidates[int(np.argmax(clearance))]))
-    axes.tick_params(axis='y', labelsize=7)
-    axes.set_title(title, fontsize=10, pad=26)
-    figure.legend(loc='lower center', ncol=2, fontsize=7.5, frameon=False)
-    figure.subplots_adjust(bottom=0.2, top=0.86)
+    axes.tick_params(axis='y', labelsize=SMALL)
+    axes.yaxis.set_major_formatter(StrMethodFormatter('{x:,.0f}'))
+    axes.tick_params(axis='x', labelsize=TEXT)
+    axes.set_title(title, fontsize=TEXT, pad=24)
+    figure.legend(loc='lower center', ncol=1, fontsize=TEXT, frameon=False)
+    figure.subplots_adjust(bottom=0.33, top=0.88, left=0.1, right=0.9)
     return _save(figure, path)
 
 
@@ -131,7 +141,7 @@ def _arrow(axes, start, end, colour, label, width, drawn=None):
 def grade_figure(summary, path):
     """Write the equivalent grade before, after each plan and measured after, against G."""
     grade = summary['grade']
-    rows = [('before (identified)', grade['before']['equivalent_grade'], BEFORE)]
+    rows = [('before (measured)', grade['before']['equivalent_grade'], BEFORE)]
     for plan in summary['plans']:
         if plan['after'] is not None:
             rows.append((f"after: {plan['name']} plan", plan['after']['equivalent_grade'],
@@ -139,21 +149,23 @@ def grade_figure(summary, path):
     measured = summary.get('measured_after')
     if measured is not None:
         rows.append(('measured after', measured['equivalent_grade'], MEASURED))
-    figure = Figure(figsize=(6.4, 0.55 * len(rows) + 1.3))
+    figure = Figure(figsize=(WIDTH, 0.55 * len(rows) + 1.5))
     axes = figure.add_subplot()
     labels = [r[0] for r in rows]
     values = [r[1] for r in rows]
     y = np.arange(len(rows))[::-1]
     axes.barh(y, values, color=[r[2] for r in rows], height=0.6)
     for yi, value in zip(y, values):
-        axes.text(value, yi, f'  G {value:.2f}', va='center', fontsize=9)
+        axes.text(value, yi, f' G {value:.2f}', va='center', fontsize=TEXT)
     axes.axvline(grade['grade'], color='black', ls='--', lw=1.2)
-    axes.text(grade['grade'], len(rows) - 0.4, f"  G {grade['grade']:g} allowed", ha='left',
-              va='center', fontsize=8.5)
-    axes.set_yticks(y, labels, fontsize=9)
-    axes.set_xlim(0.0, 1.25 * max(values + [grade['grade']]))
+    axes.text(grade['grade'], len(rows) - 0.4, f" G {grade['grade']:g} allowed", ha='left',
+              va='center', fontsize=TEXT)
+    axes.set_yticks(y, labels, fontsize=TEXT)
+    axes.tick_params(axis='x', labelsize=SMALL)
+    axes.set_xlim(0.0, 1.35 * max(values + [grade['grade']]))
     axes.set_ylim(-0.6, len(rows) - 0.05)
-    axes.set_xlabel(f"equivalent ISO 21940-11 grade, mm/s, at {grade['speed']:.4g} rad/s")
+    axes.set_xlabel(f"equivalent grade G, mm/s, at {grade['speed']:.4g} rad/s",
+                    fontsize=TEXT)
     figure.tight_layout()
     return _save(figure, path)
 
@@ -165,17 +177,18 @@ def readings_figure(summary, path):
     channels = [c for c in plan['residual']['channels'] if c['name'] in before]
     names = [c['name'] for c in channels]
     after = [c['amplitude'] for c in channels]
-    figure = Figure(figsize=(6.4, 0.45 * len(names) + 1.7))
+    figure = Figure(figsize=(WIDTH, 0.5 * len(names) + 1.9))
     axes = figure.add_subplot()
     y = np.arange(len(names))[::-1]
     axes.barh(y + 0.18, [before[n] for n in names], 0.36, color=BEFORE, label='run (1x)')
     axes.barh(y - 0.18, after, 0.36, color=AFTER,
               label=f"predicted after the {_plan_label(summary, plan)}")
     units = {r['channel']: r['unit'] for r in summary['readings']}
-    axes.set_yticks(y, [f'{n} [{units[n]}]' for n in names], fontsize=8.5)
-    axes.set_xlabel('1x amplitude (each sensor in its unit)')
-    figure.legend(fontsize=8, loc='upper center', ncol=2, frameon=False)
-    figure.tight_layout(rect=(0.0, 0.0, 1.0, 0.9))
+    axes.set_yticks(y, [f'{n} [{units[n]}]' for n in names], fontsize=TEXT)
+    axes.tick_params(axis='x', labelsize=SMALL)
+    axes.set_xlabel('1x amplitude (each sensor in its unit)', fontsize=TEXT)
+    figure.legend(fontsize=TEXT, loc='upper center', ncol=1, frameon=False)
+    figure.tight_layout(rect=(0.0, 0.0, 1.0, 0.82))
     return _save(figure, path)
 
 

@@ -4,26 +4,33 @@ The field-balancing report: one HTML page (no scripts, no network) beside its PN
 At the top the verdict (the grade before and after, in or out), then what to bolt where,
 the figures, the plans compared, the run's identity (bag, date, layout name and digest,
 speed, revolutions), the coefficients used and every warning. Every text from the run
-(paths, names) is escaped.
+(paths, names) is escaped. It reads on a phone too (390 CSS pixels): the verdict boxes and
+the figures stack, long words (paths) wrap, and a table wider than the screen scrolls
+inside its own box while the page does not.
 """
 
 import datetime
 from html import escape
 
 STYLE = '''
-body { font-family: sans-serif; margin: 1.5em auto; max-width: 62em; color: #222; }
+body { font-family: sans-serif; margin: 1.5em auto; padding: 0 0.8em; max-width: 62em;
+color: #222; line-height: 1.35; }
 h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.15em; margin-top: 1.6em; }
-.verdict { display: flex; gap: 1em; margin: 1em 0; }
-.verdict div { flex: 1; padding: 0.8em 1em; border-radius: 6px; color: white; }
+p, .warning, figcaption { overflow-wrap: anywhere; }
+.verdict { display: flex; flex-wrap: wrap; gap: 1em; margin: 1em 0; }
+.verdict div { flex: 1 1 11em; padding: 0.8em 1em; border-radius: 6px; color: white; }
 .ok { background: #2e7d32; } .out { background: #c62828; } .unknown { background: #616161; }
 .verdict b { font-size: 1.6em; display: block; }
+.scroll { overflow-x: auto; max-width: 100%; }
 table { border-collapse: collapse; margin: 0.5em 0; font-size: 0.92em; }
 td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: right; }
-th { background: #eee; } td.text, th.text { text-align: left; }
+th { background: #eee; } td.text, th.text { text-align: left; } td { white-space: nowrap; }
+td.text { white-space: normal; overflow-wrap: anywhere; }
 .bolt td { font-size: 1.1em; } .warning { background: #fff3e0; border-left: 4px solid #ef6c00;
 padding: 0.4em 0.8em; margin: 0.3em 0; }
 figure { display: inline-block; margin: 0.5em 1%; width: 47%; vertical-align: top; }
-figure img { width: 100%; } .small { color: #666; font-size: 0.85em; }
+figure img { width: 100%; height: auto; } .small { color: #666; font-size: 0.85em; }
+@media (max-width: 40em) { figure { display: block; width: 100%; margin: 0.8em 0; } }
 '''
 
 
@@ -42,12 +49,24 @@ def _grade_box(label, value, grade):
 
 
 def _table(header, rows, text_columns=1, css=''):
+    """
+    Return a table (in a box that scrolls sideways when it is wider than the screen).
+
+    ``header`` the column names; the first ``text_columns`` columns are left-aligned.
+    """
     head = ''.join(f'<th class="text">{escape(h)}</th>' if i < text_columns
                    else f'<th>{escape(h)}</th>' for i, h in enumerate(header))
     body = ''.join('<tr>' + ''.join(
         f'<td class="text">{escape(str(c))}</td>' if i < text_columns
         else f'<td>{escape(str(c))}</td>' for i, c in enumerate(row)) + '</tr>' for row in rows)
-    return f'<table class="{css}"><tr>{head}</tr>{body}</table>'
+    return f'<div class="scroll"><table class="{css}"><tr>{head}</tr>{body}</table></div>'
+
+
+def _pairs(rows):
+    """Return a table of (what, value) rows: each row headed by its name, no header row."""
+    body = ''.join(f'<tr><th class="text" scope="row">{escape(str(k))}</th>'
+                   f'<td class="text">{escape(str(v))}</td></tr>' for k, v in rows)
+    return f'<div class="scroll"><table class="pairs">{body}</table></div>'
 
 
 def _hole(weight):
@@ -74,7 +93,7 @@ def _segment_row(segment, used):
 def _check_html(check):
     if not check['checked']:
         return f'<p>Not checked: {escape(check["note"])}</p>'
-    rows = [(p['plane'], f"{p['factor']:.3g}", f"{p['phase_deg']:+.0f}",
+    rows = [(p['plane'], f"{p['factor']:.3g}", f"{round(p['phase_deg']) + 0:+d}",
              'yes' if p['agrees'] else 'NO') for p in check['planes']]
     said = ('The measured coefficients are what the layout\'s physics predicts for load cells '
             'on a rigid rotor (within a factor 3 and 45 deg).' if check['agrees'] else
@@ -99,6 +118,7 @@ def page(summary, figures, generated=None):
     source = 'readings by hand' if by_hand else \
         f'run {escape(run["bag"])}, recorded {escape(run["date"])}'
     parts = [f'<!DOCTYPE html><html lang="en"><head><meta charset="utf-8">'
+             '<meta name="viewport" content="width=device-width, initial-scale=1">'
              f'<title>{escape(title)}</title><style>{STYLE}</style></head><body>',
              f'<h1>{escape(title)}</h1>',
              f'<p class="small">{source}; '
@@ -217,7 +237,7 @@ def page(summary, figures, generated=None):
                      f"{measured['equivalent_grade']:.2f}, " + ', '.join(
                          f"plane {q['plane']} {q['g_mm']:.0f} g mm" for q in
                          measured['planes'])))
-    parts.append('<h2>Run</h2>' + _table(('', ''), rows, 2))
+    parts.append('<h2>Run</h2>' + _pairs(rows))
     segments = summary.get('segments') or []
     if segments:
         parts.append('<h2 id="segments">Layout segments of the run</h2>' + _table(
@@ -226,6 +246,7 @@ def page(summary, figures, generated=None):
             [_segment_row(s, run.get('segment')) for s in segments], 3))
         parts.append('<p class="small">A run is read inside one layout segment, never across '
                      'a layout change (--segment N to choose).</p>')
+    parts.append('<h2 id="readings">1x readings (order tracking)</h2>')
     parts.append(_table(('channel', 'unit', '1x amplitude', 'phase [deg]', 'std. error'),
                         [(r['channel'], r['unit'], f"{r['amplitude']:.4g}",
                           _deg(r['phase_deg']),

@@ -118,23 +118,22 @@ def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
     """
     motion = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
                                     '(OK, WARN, ERROR)'),
-              rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its '
-                                 'limit',
+              rrb.TimeSeriesView(origin='plots/unbalance', name='unbalance per plane / its limit',
                                  plot_legend=rrb.PlotLegend('LeftTop')),
               rrb.TimeSeriesView(origin='plots/speed', name='speed ω, acceleration α',
                                  plot_legend=rrb.PlotLegend('LeftTop')),
               rrb.TimeSeriesView(origin='plots/drive_torque', name='drive torque [N m]',
                                  plot_legend=rrb.PlotLegend('RightTop'))]
-    loads = [rrb.TimeSeriesView(origin='plots/load_rotating', name='rotating load per support '
-                                '[N]',
+    loads = [rrb.TimeSeriesView(origin='plots/load_rotating', name='rotating load per support [N]',
                                 plot_legend=rrb.PlotLegend('LeftTop')),
-             rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support '
-                                '[N]', plot_legend=rrb.PlotLegend('RightBottom'),
+             rrb.TimeSeriesView(origin='plots/load_static', name='static weight per support [N]',
+                                plot_legend=rrb.PlotLegend('RightBottom'),
                                 axis_y=rrb.ScalarAxis(range=list(static_range))
                                 if static_range else None)]
     if cells:
-        loads += [rrb.TimeSeriesView(origin=f'plots/cells/{name}', name=f'{name} load cell x, less its '
-                                     'zero [N]', plot_legend=rrb.PlotLegend('LeftTop'))
+        loads += [rrb.TimeSeriesView(origin=f'plots/cells/{name}',
+                                     name=f'{name} load cell x, less its zero [N]',
+                                     plot_legend=rrb.PlotLegend('LeftTop'))
                   for name in support_names]
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
                                 y_range=list(POLAR_BOUNDS[1:]))
