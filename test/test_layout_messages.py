@@ -85,10 +85,13 @@ REFUSED = [
     (component(1, name='tube'), "component 'tube': duplicate name (names must be unique)"),
     (drop(1, 'mass'), "component 'detector': missing field mass"),
     (component(0, mass=True), "component 'tube': field mass must be a number, got True"),
-    (component(0, mass=0.0), "component 'tube': field mass must be > 0, got 0"),
+    (component(0, mass=0.0), "component 'tube': field mass must be from 1e-06 to 1e+12 kg "
+                             '(a milligram or more: lighter is no part, and divides mass '
+                             'ratios to inf), got 0 kg'),
     (component(0, mass=math.nan), "component 'tube': field mass must be finite, got nan"),
     (drop(1, 'radius'), "component 'detector': missing field radius"),
-    (component(1, radius=-0.1), "component 'detector': field radius must be >= 0, got -0.1"),
+    (component(1, radius=-0.1), "component 'detector': field radius must be from 0 to "
+                                '1e+12 m (0 on the spin axis), got -0.1 m'),
     (component(1, angle=1.0), "component 'detector': give exactly one of fields angle (rad) "
                               'and angle_deg'),
     (drop(1, 'angle_deg'), "component 'detector': give exactly one of fields angle (rad) "
@@ -110,7 +113,10 @@ REFUSED = [
     (shape(type='cylinder', radius=0.1), "component 'tube': field shape: missing field "
                                          'length'),
     (shape(type='cylinder', radius=0.0, length=0.2), "component 'tube': field shape.radius "
-                                                     'must be > 0, got 0'),
+                                                     'must be from 1e-06 to 1e+12 m (a '
+                                                     'micrometre or more: no solid part is '
+                                                     'thinner, and a density is the mass over '
+                                                     'the volume), got 0 m'),
     (shape(type='cylinder', radius=0.1, length=0.2, axis='diagonal'),
      "component 'tube': field shape.axis: unknown axis 'diagonal', expected one of radial, "
      'tangential, axial'),
@@ -120,7 +126,9 @@ REFUSED = [
     (shape(type='box', size=[0.1, 0.2]), "component 'tube': field shape.size must be a list "
                                          'of 3 numbers, got [0.1, 0.2]'),
     (shape(type='box', size=[0.1, 0.0, 0.2]), "component 'tube': field shape.size[1] must be "
-                                              '> 0, got 0'),
+                                              'from 1e-06 to 1e+12 m (a micrometre or more: '
+                                              'no solid part is thinner, and a density is '
+                                              'the mass over the volume), got 0 m'),
     (shape(type='tube', inner_radius=0.2, outer_radius=0.2, length=0.1),
      "component 'tube': field shape.inner_radius must be less than outer_radius"),
     (shape(type='point', radius=0.1), "component 'tube': field shape (point): unknown field "
@@ -169,12 +177,18 @@ REFUSED = [
     (top(balancing={'planes': [0.2, 0.2]}), 'layout: field balancing.planes: give [z_I, '
                                             'z_II] with z_I < z_II'),
     (top(balancing={'correction_radius': 0.0}), 'layout: field balancing.correction_radius '
-                                                'must be > 0, got 0'),
-    (top(balancing={'grade': 0.0}), 'layout: field balancing.grade must be > 0, got 0'),
+                                                'must be from 1e-06 to 1e+12 m (a micrometre '
+                                                'or more: a correction mass is the unbalance '
+                                                'over it), got 0 m'),
+    (top(balancing={'grade': 0.0}), 'layout: field balancing.grade must be from 0.1 to 4000 '
+                                    'mm/s (ISO 21940-11 grades run from G 0.4 to G 4000), '
+                                    'got 0 mm/s'),
     (top(balancing={'grade': 'G6.3'}), "layout: field balancing.grade must be a number, "
                                        "got 'G6.3'"),
     (top(balancing={'service_speed': -1.0}), 'layout: field balancing.service_speed must be '
-                                             '> 0, got -1'),
+                                             'from 0.001 to 100000 rad/s (a turn in 100 '
+                                             'minutes to 955 000 rpm: slower is no balancing '
+                                             'speed, faster no rotor), got -1 rad/s'),
 ]
 
 

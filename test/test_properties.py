@@ -14,6 +14,7 @@ import numpy as np
 
 from cvc_balance.physics.engine import loads, RotorModel, sample_loads
 from cvc_balance.physics.layout import parse_layout
+from cvc_balance.physics.limits import MASS
 from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
 SUPPORTS = [{'name': 'front', 'z': -0.3}, {'name': 'rear', 'z': 0.35, 'axial': True}]
@@ -143,8 +144,15 @@ def test_correction_masses_cancel_the_dynamic_unbalance(parts, correction_radius
     _, omega, alpha = motion
     model = model_of(parts, ZERO_G)
     planes = plane_unbalances(model, -0.3, 0.35, correction_radius)
-    weights = [(p.correction_mass, p.correction_radius, p.correction_angle, p.z, None)
-               for p in planes if p.correction_mass > 0.0]
+    weights = []
+    for p in planes:
+        if p.correction_mass >= MASS.low:
+            weights.append((p.correction_mass, p.correction_radius, p.correction_angle, p.z,
+                            None))
+        elif p.correction_mass > 0.0:   # lighter than a layout's mass: as a pair, 0.1 kg apart
+            weights += [(0.1 + p.correction_mass, p.correction_radius, p.correction_angle,
+                         p.z, None),
+                        (0.1, p.correction_radius, p.correction_angle + math.pi, p.z, None)]
     corrected = model_of(parts + weights, ZERO_G)
     tolerance = ROUNDING * scale(parts, 1.0, 0.0) / max(correction_radius, 1.0)
     for plane in plane_unbalances(corrected, -0.3, 0.35, correction_radius):

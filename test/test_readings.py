@@ -329,7 +329,8 @@ def test_the_command_prints_what_people_read(rig):
     (['--channel-unit', 'tach=g'], ['--channel-unit names tach, no vibration channel',
                                     'accel, accel3, imu']),
     (['--keyphasor-threshold', '9'], ['keyphasor /keyphasor gives 0 marks']),
-    (['--speed-tolerance', '0'], ['--speed-tolerance: must be > 0']),
+    (['--speed-tolerance', '0'], ['--speed-tolerance: must be from 0.001 to 100 % (of the '
+                                  'speed), got 0 %']),
 ])
 def test_bad_input_is_one_line_and_exit_2(rig, args, needles):
     done = cli('readings', rig, *args)

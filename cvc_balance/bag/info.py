@@ -17,13 +17,13 @@ from pathlib import Path
 import time
 
 import numpy as np
-import yaml
 
 from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
 from cvc_balance.bag.mcap_reader import Bag, string_samples
-from cvc_balance.bag.rosbag2 import METADATA, open_bag, PartsBag, RosbagsBag
+from cvc_balance.bag.rosbag2 import MAX_METADATA_BYTES, METADATA, open_bag, PartsBag, RosbagsBag
 from cvc_balance.bag.rosbag2_metadata import RECORD, SERIALIZED
 from cvc_balance.messages import topics
+from cvc_balance.physics.documents import load_document, read_document
 
 INDENT = 19
 """ros2 bag info's column of values: its longest label ('Topic information: ') plus one."""
@@ -127,7 +127,7 @@ def _ros_distro(path, parts):
     directory = path if path.is_dir() else path.parent if path.name == METADATA else None
     if directory is not None:
         try:
-            info = yaml.safe_load((directory / METADATA).read_text(encoding='utf-8'))
+            info = read_document(directory / METADATA, MAX_METADATA_BYTES)
             distro = info['rosbag2_bagfile_information'].get('ros_distro')
             if distro:
                 return str(distro)
@@ -140,7 +140,7 @@ def _ros_distro(path, parts):
             if name != RECORD:
                 continue
             try:
-                distro = yaml.safe_load(values.get(SERIALIZED, '')).get('ros_distro')
+                distro = load_document(values.get(SERIALIZED, '')).get('ros_distro')
             except Exception:   # a damaged record: an earlier one may say
                 continue
             if distro:

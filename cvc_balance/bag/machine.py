@@ -18,11 +18,10 @@ key), a directory's ``metadata.yaml``. A bag that names no machine gets one from
 from pathlib import Path
 import re
 
-import yaml
-
 from cvc_balance.bag.rosbag2 import METADATA
 from cvc_balance.bag.rosbag2_metadata import CUSTOM_DATA_RECORD, RECORD as ROSBAG2_RECORD
 from cvc_balance.bag.rosbag2_metadata import SERIALIZED
+from cvc_balance.physics.documents import DocumentError, load_document
 
 MACHINE_ID = 'machine_id'
 """The custom-data key of the machine's identity."""
@@ -119,8 +118,8 @@ def _yaml_custom_data(text):
     if not text:
         return {}
     try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError:
+        document = load_document(text, as_text=True)     # custom_data: strings
+    except DocumentError:
         return {}
     info = document.get('rosbag2_bagfile_information', document) \
         if isinstance(document, dict) else None

@@ -38,15 +38,15 @@ from mcap.records import (AttachmentIndex, Channel, ChunkIndex, DataEnd, Footer,
                           MessageIndex, MetadataIndex, Statistics, SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 import numpy as np
-import yaml
 
 from cvc_balance.bag.mcap_reader import (Bag, BagError, column, crc32, MESSAGE_HEADER,
                                          OP_CHANNEL, OP_MESSAGE, OP_SCHEMA, record_table)
 from cvc_balance.bag.mcap_writer import _compressor, TopicWritten
-from cvc_balance.bag.rosbag2 import METADATA
+from cvc_balance.bag.rosbag2 import MAX_METADATA_BYTES, METADATA
 from cvc_balance.bag.rosbag2_metadata import (bag_metadata, CUSTOM_DATA_RECORD, metadata_yaml,
                                               offered)
 from cvc_balance.files import created_when_done, replaced_when_done
+from cvc_balance.physics.documents import read_document
 
 LOOSE_CHUNK = 1 << 20
 """Bytes of messages found outside chunks gathered into one (uncompressed) chunk."""
@@ -186,7 +186,7 @@ def _reindex_directory(directory, output, in_place):
 def _yaml_custom_data(path):
     """custom_data of a metadata.yaml ({} if none or unreadable)."""
     try:
-        document = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+        document = read_document(path, MAX_METADATA_BYTES, as_text=True)   # strings
         data = document['rosbag2_bagfile_information'].get('custom_data')
     except Exception:  # absent, unreadable, not rosbag2 metadata: nothing to keep
         return {}

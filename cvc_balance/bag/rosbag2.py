@@ -33,13 +33,15 @@ import re
 import struct
 
 import numpy as np
-import yaml
 
 from cvc_balance.bag.mcap_reader import Bag, BagError, MAGIC, select_channel
 from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.bag.rosbag2_metadata import metadata_yaml
+from cvc_balance.physics.documents import DocumentError, read_document
 
 METADATA = 'metadata.yaml'
+MAX_METADATA_BYTES = 16 * 2**20
+"""Largest metadata.yaml read, bytes (a few kB per split file)."""
 SQLITE_MAGIC = b'SQLite format 3\x00'
 BATCH = 1 << 16
 """Messages read through rosbags packed into one buffer."""
@@ -119,8 +121,8 @@ def _parts_bag(directory, files, problems):
 
 def _metadata(path):
     try:
-        document = yaml.safe_load(path.read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+        document = read_document(path, MAX_METADATA_BYTES)
+    except (OSError, DocumentError) as error:
         raise BagError(f'{path}: unreadable: {str(error).splitlines()[0]}') from None
     info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
     if not isinstance(info, dict):

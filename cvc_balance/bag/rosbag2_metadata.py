@@ -190,11 +190,11 @@ def offered(profiles):
     ``profiles``: a channel's ``offered_qos_profiles`` text or a metadata.yaml list;
     best effort (latched) when any profile offers it. Unreadable: (False, False).
     """
-    import yaml
+    from cvc_balance.physics.documents import DocumentError, load_document
     if isinstance(profiles, (str, bytes)):
         try:
-            profiles = yaml.safe_load(profiles)
-        except yaml.YAMLError:
+            profiles = load_document(profiles)
+        except DocumentError:
             return False, False
     best_effort = latched = False
     for profile in profiles if isinstance(profiles, list) else ():

@@ -38,16 +38,18 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from cvc_balance.bag.machine import custom_data
 from cvc_balance.bag.mcap_writer import MessageBlock
 from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import joint_state_layout, string_message, wrench_stamped_layout
+from cvc_balance.physics import limits
+from cvc_balance.physics.documents import DocumentError, dump_document, read_document
 from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.frames import radians, STANDARD_GRAVITY, STATOR_FRAME, wrap_angle
 from cvc_balance.physics.layout import LayoutError, parse_layout
+from cvc_balance.physics.layout_file import MAX_TEXT_BYTES
 
 
 class ScenarioError(ValueError):
@@ -115,13 +117,36 @@ class Scenario:
         return np.round((self.start + self.time) * 1e9).astype(np.int64)
 
 
+def _document(path, what):
+    """Read the YAML 1.2 or JSON document at ``path`` (a regular file) for a scenario."""
+    try:
+        return read_document(path, MAX_TEXT_BYTES)
+    except OSError as error:
+        raise ScenarioError(f'{path}: cannot read {what}: {error.strerror}') from None
+    except DocumentError as error:
+        message = str(error)
+        raise ScenarioError(message if message.startswith(str(path)) else f'{path}: {message}') \
+            from None
+
+
+def _number(spec, key, default, where, limit):
+    """Return ``spec[key]`` (or ``default``) as a float within ``limit``, or refuse it."""
+    value = spec.get(key, default) if isinstance(spec, dict) else None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f'{where}: field {key} must be a number, got {value!r}'[:300])
+    try:
+        value = float(value)
+    except OverflowError:
+        value = math.inf
+    if not math.isfinite(value):
+        raise ScenarioError(f'{where}: field {key} must be finite, got {value}')
+    return limits.check(value, limit, f'{where}: field {key}', ScenarioError)
+
+
 def load_scenario(path):
     """Read and check a scenario file; raises :class:`ScenarioError`."""
     path = Path(path)
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as error:
-        raise ScenarioError(f'{path}: cannot read scenario: {error}') from None
+    spec = _document(path, 'scenario')
     if not isinstance(spec, dict):
         raise ScenarioError(f'{path}: a scenario is a mapping')
     if 'components' in spec and 'profile' not in spec:
@@ -136,14 +161,15 @@ def load_scenario(path):
     layout = spec.get('layout')
     if isinstance(layout, str):
         try:
-            layout = yaml.safe_load((path.parent / layout).read_text())
-        except (OSError, yaml.YAMLError) as error:
-            raise ScenarioError(f'{path}: layout {spec["layout"]}: {error}') from None
+            layout = _document(path.parent / layout, 'layout')
+        except ScenarioError as error:
+            raise ScenarioError(f'{path}: field layout: {error}') from None
     if not isinstance(layout, dict):
         raise ScenarioError(f'{path}: field layout: give a layout file path or mapping')
-    rate = float(spec.get('rate', 500.0))
-    if not rate > 0:
-        raise ScenarioError(f'{path}: field rate must be > 0')
+    rate = _number(spec, 'rate', 500.0, str(path), limits.SAMPLE_RATE)
+    _number(spec, 'start', 1.0, str(path), limits.START)
+    for key in ('angle', 'speed'):
+        _number(spec.get('noise') or {}, key, 0.0, f'{path}: field noise', limits.NOISE)
     time, angle, omega, pieces = _motion(spec.get('profile') or [], rate, path)
     events = spec.get('events') or []
     layouts = _layouts(layout, events, path)
@@ -159,16 +185,25 @@ def load_scenario(path):
 def _motion(profile, rate, path):
     """Exact motion: piecewise constant alpha segments from rest."""
     pieces, omega = [], 0.0
+    if not isinstance(profile, list):
+        raise ScenarioError(f'{path}: field profile: give a list of steps')
     for i, step in enumerate(profile):
         kind = step.get('type') if isinstance(step, dict) else None
+        where = f'{path}: profile step {i + 1} ({kind})'
         if kind in ('spin_up', 'coast_down', 'ramp'):
-            alpha, target = float(step['alpha']), float(step['to'])
+            alpha = _number(step, 'alpha', None, where, limits.POSITION)
+            target = _number(step, 'to', None, where, limits.POSITION)
+            if abs(target) > limits.SPEED.high:
+                raise ScenarioError(limits.SPEED.message(f'{where}: field to (its size)', target))
             duration = (target - omega) / alpha if alpha else -1.0
             if not duration > 0:
                 raise ScenarioError(f'{path}: profile step {i + 1} ({kind}): alpha {alpha} '
                                     f'does not take {omega} rad/s to {target} rad/s')
         elif kind == 'steady':
-            alpha, duration = 0.0, float(step['duration'])
+            alpha = 0.0
+            duration = _number(step, 'duration', None, where, limits.POSITION)
+            if not duration > 0:
+                raise ScenarioError(f'{where}: field duration must be > 0 s, got {duration:g}')
         else:
             raise ScenarioError(f'{path}: profile step {i + 1}: type must be spin_up, steady, '
                                 f'coast_down or ramp, got {kind!r}')
@@ -177,6 +212,10 @@ def _motion(profile, rate, path):
     if not pieces:
         raise ScenarioError(f'{path}: field profile: needs at least one step')
     total = sum(d for d, _ in pieces)
+    samples = total * rate + 1
+    if not samples <= limits.SAMPLES.high:             # inf too
+        raise ScenarioError(limits.SAMPLES.message(
+            f'{path}: the profile ({total:g} s at {rate:g} samples/s)', samples))
     time = np.arange(int(total * rate) + 1) / rate
     return (time, *exact_motion(pieces, time)[:2], pieces)
 
@@ -250,9 +289,8 @@ def _load_cells(spec, layout, path):
         return None
     if not isinstance(spec, dict):
         raise ScenarioError(f'{path}: field load_cells: give rate, noise and bias')
-    rate = float(spec.get('rate', 250.0))
-    if not rate > 0:
-        raise ScenarioError(f'{path}: field load_cells.rate must be > 0')
+    rate = _number(spec, 'rate', 250.0, f'{path}: field load_cells', limits.SAMPLE_RATE)
+    _number(spec, 'noise', 0.0, f'{path}: field load_cells', limits.NOISE)
     bias = spec.get('bias') or {}
     names = [s.name for s in layout.supports]
     for name, value in bias.items():
@@ -282,7 +320,7 @@ def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16, machine
             # A layout change goes out half a sample before the sample it first applies to.
             log_time = int(round((scenario.start + at - 0.5 / scenario.rate) * 1e9))
             writer.write(layout_channel, log_time,
-                         string_message(yaml.safe_dump(mapping, sort_keys=False)))
+                         string_message(dump_document(mapping)))
         block = MessageBlock([(joint_channel, joint_state_layout('', [scenario.joint_name]))],
                              len(stamps))
         block.array['0.sec'], block.array['0.nanosec'] = np.divmod(stamps, 1_000_000_000)

@@ -4,10 +4,12 @@ import argparse
 from contextlib import contextmanager, ExitStack
 import json
 import math
+import os
 import re
+import stat
 
 from cvc_balance.files import check_output, distinct_outputs, replaced_when_done
-from cvc_balance.physics.layout import MAX_MAGNITUDE
+from cvc_balance.physics.limits import MAX_MAGNITUDE
 
 EXIT_FAILURE = 1
 """Exit code of a command that failed for another reason than its input (a bug)."""
@@ -136,3 +138,73 @@ def staged_outputs(inputs, bags=(), **outputs):
     with ExitStack() as stack:
         yield {name: None if path is None else stack.enter_context(replaced_when_done(path))
                for name, path in outputs.items()}
+
+
+def within(limit):
+    """
+    Return an argparse type: a number within ``limit`` (a :class:`limits.Limit`).
+
+    A whole number when the limit's ends are (counts, seeds); the refusal names the
+    range, its unit and its reason.
+    """
+    whole = isinstance(limit.low, int) and isinstance(limit.high, int)
+
+    def parse(text):
+        if whole:
+            try:
+                value = int(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f'not a whole number: {text!r}') from None
+        else:
+            value = number(text)
+            if not math.isfinite(value):
+                raise argparse.ArgumentTypeError(f'must be finite, got {text!r}')
+        if not limit.contains(value):
+            unit = f' {limit.unit}' if limit.unit else ''
+            raise argparse.ArgumentTypeError(f'must be {limit.describe()} ({limit.reason}), '
+                                             f'got {text}{unit}')
+        return value
+    parse.__name__ = 'whole number' if whole else 'number'
+    return parse
+
+
+def input_file(text):
+    """
+    Parse a path to read (argparse type): refused when it is there but no regular file.
+
+    A FIFO, a device or a socket could block the command or never end; a directory is
+    no file. A path that is not there is left to the reader (which says so).
+    """
+    return _input_path(text, directory=False)
+
+
+def input_path(text):
+    """Parse a path to read that may be a directory (argparse type): a bag, a table."""
+    return _input_path(text, directory=True)
+
+
+input_bag = input_path
+"""A bag's path (argparse type): a regular file or a (rosbag2) directory."""
+
+
+def _input_path(text, directory):
+    from cvc_balance.physics.documents import file_kind
+    try:
+        mode = os.stat(text).st_mode
+    except OSError:
+        return text                              # absent or unreadable: the reader says
+    if stat.S_ISREG(mode) or directory and stat.S_ISDIR(mode):
+        return text
+    wanted = 'a regular file or a directory' if directory else 'a regular file'
+    raise argparse.ArgumentTypeError(f'{text}: {file_kind(mode)}, not {wanted}: refused')
+
+
+def add_bounded(parser, *flags, limit, help='', **options):
+    """
+    Add a numeric option whose value must be within ``limit``; its help says the range.
+
+    ``options`` as ``add_argument``'s (default, metavar, nargs...).
+    """
+    said = f'{help} ' if help else ''
+    parser.add_argument(*flags, type=within(limit),
+                        help=said + f'({limit.describe()})'.replace('%', '%%'), **options)

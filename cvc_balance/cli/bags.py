@@ -7,10 +7,11 @@ Heavy modules (rclpy, rerun) are imported by the command that needs them only.
 import argparse
 import sys
 
-from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, finite, input_topics,
-                                       machine_id, OUTPUT_BAG_HELP, positive, print_json,
-                                       staged_outputs, tolerance)
+from cvc_balance.cli.arguments import (add_bounded, add_input_topics, BAG_HELP, finite,
+                                       input_bag, input_file, input_topics, machine_id,
+                                       OUTPUT_BAG_HELP, print_json, staged_outputs, tolerance)
 from cvc_balance.files import check_new_output, check_output
+from cvc_balance.physics import limits
 from cvc_balance.physics.model_choice import Tolerance
 from cvc_balance.physics.motion import MAX_STAMP_JUMP
 
@@ -20,7 +21,8 @@ def register(commands):
     simulate = commands.add_parser('simulate', help='make an input bag from a scenario',
                                    description='Write a bag of /layout and /joint_states '
                                    'from a scenario file (speed profile, noise, layout changes).')
-    simulate.add_argument('scenario', metavar='SCENARIO', help='scenario file (YAML)')
+    simulate.add_argument('scenario', type=input_file, metavar='SCENARIO',
+                          help='scenario file (YAML)')
     simulate.add_argument('-o', '--output', required=True, metavar='BAG', help=OUTPUT_BAG_HELP)
     simulate.add_argument('--machine-id', type=machine_id, metavar='ID',
                           help='the machine the run is recorded on, written into the bag '
@@ -31,19 +33,20 @@ def register(commands):
                                  description='Read a bag\'s motion and layouts, compute every '
                                  'output with the vectorised engine, write them as a bag and '
                                  'print a summary. No ROS graph needed.')
-    replay.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    replay.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
     replay.add_argument('-o', '--output', metavar='OUT', help=OUTPUT_BAG_HELP)
-    replay.add_argument('--layout-file', metavar='FILE', help='use this layout for the whole '
-                        'run ("what if") instead of the bag\'s')
+    replay.add_argument('--layout-file', type=input_file, metavar='FILE',
+                        help='use this layout for the whole run ("what if") instead of the '
+                        'bag\'s')
     add_input_topics(replay)
     replay.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
-    replay.add_argument('--alpha-time-constant', type=positive, default=0.1, metavar='S',
-                        help='as the node\'s parameter (s)')
-    replay.add_argument('--max-speed', type=positive, default=1000.0, metavar='W',
-                        help='as the node\'s parameter (rad/s)')
-    replay.add_argument('--max-stamp-jump', type=positive, default=MAX_STAMP_JUMP, metavar='S',
-                        help='as the node\'s parameter (s): a sample stamped more than S from '
-                        'the previous is rejected unless the next one agrees')
+    add_bounded(replay, '--alpha-time-constant', limit=limits.TIME_CONSTANT, default=0.1,
+                metavar='S', help='as the node\'s parameter (s)')
+    add_bounded(replay, '--max-speed', limit=limits.SPEED, default=1000.0, metavar='W',
+                help='as the node\'s parameter (rad/s)')
+    add_bounded(replay, '--max-stamp-jump', limit=limits.STAMP_JUMP, default=MAX_STAMP_JUMP,
+                metavar='S', help='as the node\'s parameter (s): a sample stamped more than S '
+                'from the previous is rejected unless the next one agrees')
     replay.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
     replay.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress bar (default: on a terminal)')
@@ -61,10 +64,10 @@ def register(commands):
     view = commands.add_parser('view', help='log every sample of a bag to a rerun .rrd',
                                description='Compute a bag\'s run (as replay does) and log it '
                                'for the rerun viewer: the turning gantry, loads, unbalance.')
-    view.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    view.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
     view.add_argument('-o', '--output', required=True, metavar='RUN.rrd')
-    view.add_argument('--every', type=count, default=10, metavar='N',
-                      help='draw load arrows for every N-th sample (plots get all)')
+    add_bounded(view, '--every', limit=limits.EVERY, default=10, metavar='N',
+                help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
     add_input_topics(view)
     view.add_argument('--screenshot', metavar='PNG', help='also render the viewer headless '
@@ -77,17 +80,17 @@ def register(commands):
                                description='Publish the bag\'s layout and motion messages with '
                                'their timing (to drive a running balance_monitor) and record '
                                'the node\'s outputs.')
-    play.add_argument('bag', metavar='BAG', help=BAG_HELP)
-    play.add_argument('--rate', type=positive, default=1.0, metavar='X',
-                      help='playback speed factor (default 1)')
+    play.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
+    add_bounded(play, '--rate', limit=limits.PLAY_RATE, default=1.0, metavar='X',
+                help='playback speed factor (default 1)')
     play.add_argument('-o', '--output', metavar='OUT', help='record the node\'s outputs (and '
                       '/diagnostics) to this bag: a .mcap file, or a rosbag2 directory for '
                       'any other name; a name not taken (never replaced)')
     add_input_topics(play)
-    play.add_argument('--wait', type=positive, default=20.0, metavar='S',
-                      help='give up (exit code 1) when no node subscribes to the motion topic, '
-                      "or the recorder sees none of the node's outputs, within S seconds "
-                      '(default 20)')
+    add_bounded(play, '--wait', limit=limits.WAIT, default=20.0, metavar='S',
+                help='give up (exit code 1) when no node subscribes to the motion topic, '
+                "or the recorder sees none of the node's outputs, within S seconds "
+                '(default 20)')
     play.set_defaults(run=_play)
 
     info = commands.add_parser('info', help='what ros2 bag info prints of a bag, and its '
@@ -115,8 +118,8 @@ def register(commands):
     record.add_argument('topics', nargs='*', metavar='TOPIC',
                         help='topics (patterns with *); default: inputs, outputs, diagnostics')
     record.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd')
-    record.add_argument('--chunk-kib', type=count, default=1024, metavar='K',
-                        help='chunk size; a killed recorder loses at most one chunk')
+    add_bounded(record, '--chunk-kib', limit=limits.CHUNK_KIB, default=1024, metavar='K',
+                help='chunk size; a killed recorder loses at most one chunk')
     record.add_argument('--machine-id', type=machine_id, metavar='ID',
                         help='the machine recorded, written into the bag (MCAP metadata; '
                         'metadata.yaml custom_data for a directory)')

@@ -9,9 +9,11 @@ prints them); angles in degrees where people type or read them.
 
 import math
 
-from cvc_balance.cli.arguments import finite, print_json, staged_outputs
+from cvc_balance.cli.arguments import (add_bounded, finite, input_file, print_json,
+                                       staged_outputs)
 from cvc_balance.design.parameters import design_parameter, parse_parameter, PARAMETERS, UNITS
 from cvc_balance.design.tolerances import describe, load_tolerances, typical_tolerances
+from cvc_balance.physics import limits
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.frames import degrees, radians
 from cvc_balance.physics.layout_file import load_layout
@@ -19,8 +21,6 @@ from cvc_balance.physics.layout_file import load_layout
 G_MM = 1e6
 """g mm per kg m."""
 DEFAULT_SAMPLES = 200_000
-MAX_SAMPLES = 20_000_000
-"""Most draws: about 2 GB of draws and statistics."""
 
 
 def register(commands):
@@ -32,12 +32,12 @@ def register(commands):
         'couple unbalance (and, with a speed, of each support\'s unbalance load), ranked by '
         'how far a typical tolerance moves the worse plane.')
     _layout_argument(sensitivity)
-    sensitivity.add_argument('--omega', type=finite, metavar='W',
-                             help="speed for the loads and the grade, rad/s (default: the "
-                             "layout's service speed)")
-    sensitivity.add_argument('--tolerances', metavar='TOL', help='tolerance file to rank by '
-                             '(default: typical ones: mass 0.5 %%, radius and z 0.5 mm, '
-                             'angle 0.1 deg)')
+    add_bounded(sensitivity, '--omega', limit=limits.SPEED, metavar='W',
+                help="speed for the loads and the grade, rad/s (default: the layout's service "
+                'speed)')
+    sensitivity.add_argument('--tolerances', type=input_file, metavar='TOL',
+                             help='tolerance file to rank by (default: typical ones: mass '
+                             '0.5 %%, radius and z 0.5 mm, angle 0.1 deg)')
     sensitivity.add_argument('--norms', action='store_true',
                              help="also the norms' one-sided slopes (they jump at balance)")
     sensitivity.add_argument('--json', action='store_true', help='print one JSON object')
@@ -50,15 +50,15 @@ def register(commands):
         'probability of meeting the grade and the tolerances that contribute most; with '
         '--target-probability, which tolerances to tighten to reach it at least cost.')
     _layout_argument(tolerance)
-    tolerance.add_argument('--tolerances', required=True, metavar='TOL',
+    tolerance.add_argument('--tolerances', type=input_file, required=True, metavar='TOL',
                            help='tolerance file (YAML or JSON; see README)')
-    tolerance.add_argument('--samples', type=int, default=DEFAULT_SAMPLES, metavar='N',
-                           help=f'Monte-Carlo draws (default {DEFAULT_SAMPLES})')
-    tolerance.add_argument('--seed', type=int, default=0, metavar='S',
-                           help='random seed (default 0): the same seed, the same draws')
-    tolerance.add_argument('--omega', type=finite, metavar='W',
-                           help="speed to judge the grade at, rad/s (default: the layout's "
-                           "service speed)")
+    add_bounded(tolerance, '--samples', limit=limits.DRAWS, default=DEFAULT_SAMPLES,
+                metavar='N', help=f'Monte-Carlo draws (default {DEFAULT_SAMPLES})')
+    add_bounded(tolerance, '--seed', limit=limits.SEED, default=0, metavar='S',
+                help='random seed (default 0): the same seed, the same draws')
+    add_bounded(tolerance, '--omega', limit=limits.SPEED, metavar='W',
+                help="speed to judge the grade at, rad/s (default: the layout's service "
+                'speed)')
     tolerance.add_argument('--target-probability', type=finite, metavar='P',
                            help='propose the least-cost tightening (cost ~ 1 / tolerance) '
                            'that meets the grade with probability P')
@@ -78,11 +78,11 @@ def register(commands):
     sweep.add_argument('--range', action='append', nargs=2, type=finite, required=True,
                        metavar=('A', 'B'), help='from A to B (deg for angles, else SI), '
                        'once per parameter')
-    sweep.add_argument('--points', type=int, metavar='N',
-                       help='grid points per parameter (default 401; 121 for a map)')
-    sweep.add_argument('--omega', type=finite, metavar='W',
-                       help="speed for the loads and the grade, rad/s (default: the layout's "
-                       "service speed)")
+    add_bounded(sweep, '--points', limit=limits.POINTS, metavar='N',
+                help='grid points per parameter (default 401; 121 for a map)')
+    add_bounded(sweep, '--omega', limit=limits.SPEED, metavar='W',
+                help="speed for the loads and the grade, rad/s (default: the layout's service "
+                'speed)')
     sweep.add_argument('--derivative', action='store_true',
                        help="one parameter: add the resultant's derivative (the norm's jump, "
                        "the vector's smooth components)")
@@ -99,25 +99,22 @@ def register(commands):
     _layout_argument(balance)
     balance.add_argument('--free', nargs='+', required=True, metavar='C.P',
                          help='free parameters, e.g. counterweight_rear.angle')
-    balance.add_argument('--omega', type=finite, metavar='W',
-                         help="speed to judge the grade at, rad/s (default: the layout's "
-                         "service speed)")
+    add_bounded(balance, '--omega', limit=limits.SPEED, metavar='W',
+                help="speed to judge the grade at, rad/s (default: the layout's service "
+                'speed)')
     balance.add_argument('--json', action='store_true', help='print one JSON object')
     balance.set_defaults(run=run_balance)
 
 
 def _layout_argument(parser):
     """Add the LAYOUT argument."""
-    parser.add_argument('layout', metavar='LAYOUT', help='layout file (YAML or JSON)')
+    parser.add_argument('layout', type=input_file, metavar='LAYOUT',
+                        help='layout file (YAML or JSON)')
 
 
 def _speed(args, layout):
     """Return the speed asked (rad/s), else the layout's service speed, else None."""
-    if args.omega is not None:
-        if not args.omega > 0.0:
-            raise ValueError(f'--omega must be > 0 rad/s, got {args.omega:g}')
-        return args.omega
-    return layout.balancing.service_speed
+    return args.omega if args.omega is not None else layout.balancing.service_speed
 
 
 # --- sensitivity ---------------------------------------------------------------------
@@ -229,10 +226,6 @@ def _sensitivity_table(summary, tolerances, layout):
 def run_tolerance(args):
     """Run ``cvc-balance tolerance``."""
     from cvc_balance.design.stack import analyse
-    if not 1 <= args.samples <= MAX_SAMPLES:
-        raise ValueError(f'--samples must be 1..{MAX_SAMPLES}, got {args.samples}')
-    if args.seed < 0:
-        raise ValueError(f'--seed must be >= 0, got {args.seed}')
     target = args.target_probability
     if target is not None and not 0.0 < target < 1.0:
         raise ValueError(f'--target-probability must be between 0 and 1, got {target:g}')
@@ -375,7 +368,7 @@ def run_sweep(args):
     parameters = [design_parameter(layout, c, p) for c, p in zip(components, args.parameter)]
     ranges = [tuple(radians(v) for v in r) if p.name == 'angle' else tuple(r)
               for p, r in zip(parameters, args.range)]
-    points = args.points or (401 if count == 1 else 121)
+    points = args.points if args.points is not None else (401 if count == 1 else 121)
     if args.derivative and count != 1:
         raise ValueError('--derivative is for one parameter')
     omega = _speed(args, layout)

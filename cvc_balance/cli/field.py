@@ -14,8 +14,10 @@ import math
 from pathlib import Path
 import sys
 
-from cvc_balance.cli.arguments import count, positive, print_json
+from cvc_balance.cli.arguments import (count, input_bag, input_file, positive, print_json,
+                                       within)
 from cvc_balance.files import check_output, moved_into_when_done, replaced_when_done
+from cvc_balance.physics import limits
 from cvc_balance.physics.frames import degrees
 
 MAX_RECORD_BYTES = 16 * 2**20
@@ -31,14 +33,15 @@ def register(commands):
         description='Read the 1x amplitude and phase of every sensor (load cells, Float64 '
         'channels) over whole revolutions at steady speed in a baseline run and one run per '
         'trial weight, and save the influence coefficients (least squares over the runs).')
-    calibrate.add_argument('runs', nargs='+', metavar='RUN', help='BASELINE then one bag per '
+    calibrate.add_argument('runs', nargs='+', type=input_bag, metavar='RUN',
+                           help='BASELINE then one bag per '
                            'trial, in the order of --trial')
     calibrate.add_argument('--trial', action='append', required=True,
                            metavar='PLANE:MASS_KG@ANGLE_DEG,R_M',
                            help='the trial weight of each trial run, in order (I:0.2@0,0.68)')
     calibrate.add_argument('--keep-trial', action='store_true',
                            help='each trial weight stayed on for the runs after it')
-    calibrate.add_argument('--layout-file', metavar='FILE',
+    calibrate.add_argument('--layout-file', type=input_file, metavar='FILE',
                            help="layout to check the coefficients against (default: the "
                            "baseline's)")
     calibrate.add_argument('--segment', type=segment_number, nargs='+', metavar='N',
@@ -47,7 +50,7 @@ def register(commands):
                            'stretch; a run is never read across a layout change)')
     _accept_mismatch(calibrate)
     _run_options(calibrate)
-    calibrate.add_argument('--speed', type=positive, metavar='W',
+    calibrate.add_argument('--speed', type=within(limits.SPEED), metavar='W',
                            help='read the runs at this steady speed, rad/s (default: the '
                            "baseline's)")
     calibrate.add_argument('--sensor', action='append', metavar='NAME',
@@ -78,9 +81,9 @@ def register(commands):
                            'load cells as <support>/force_x, <support>/force_y')
     influence.add_argument('--unit', default='as read', metavar='TEXT',
                            help="the readings' unit, for the record (default 'as read')")
-    influence.add_argument('--speed', type=positive, metavar='W',
+    influence.add_argument('--speed', type=within(limits.SPEED), metavar='W',
                            help='the runs\' steady speed, rad/s (for the record and the check)')
-    influence.add_argument('--layout-file', metavar='FILE',
+    influence.add_argument('--layout-file', type=input_file, metavar='FILE',
                            help="check the coefficients against this layout's physics: cells' "
                            'readings in N, trials as MASS_KG@DEG,R_M')
     _accept_mismatch(influence)
@@ -97,16 +100,17 @@ def register(commands):
         'unbalance than the grade allows in its plane and no more rotating force than 10 %% '
         'of a bearing\'s static load (the common starting rule, used when no baseline is '
         'given), rounded up to the kit.')
-    trial.add_argument('bag', nargs='?', metavar='BASELINE', help='the baseline run (.mcap); '
+    trial.add_argument('bag', nargs='?', type=input_bag, metavar='BASELINE',
+                       help='the baseline run (.mcap); '
                        'without it, --layout-file alone')
-    trial.add_argument('--layout-file', metavar='FILE',
+    trial.add_argument('--layout-file', type=input_file, metavar='FILE',
                        help="the layout (default: the baseline's)")
     trial.add_argument('--standard-errors', type=positive, default=20.0, metavar='N',
                        help='how many standard errors of the baseline the trial should move '
                        'the readings by (default 20)')
     trial.add_argument('--sigma', type=positive, metavar='N',
                        help="without a baseline: the cells' 1x standard error, N")
-    trial.add_argument('--speed', type=positive, metavar='W',
+    trial.add_argument('--speed', type=within(limits.SPEED), metavar='W',
                        help='the steady speed of the runs, rad/s (default: the baseline\'s, '
                        "or the layout's service speed)")
     trial.add_argument('--segment', type=segment_number, metavar='N',
@@ -126,9 +130,9 @@ def register(commands):
             'balancing.sites, each with the residual it leaves and the grade before and '
             'after.' + (' Writes DIR/report.html and its PNG figures.' if name == 'report'
                         else ''))
-        command.add_argument('bag', metavar='RUN', nargs='?',
+        command.add_argument('bag', type=input_bag, metavar='RUN', nargs='?',
                              help='the run to correct (.mcap); or --readings')
-        command.add_argument('--coefficients', metavar='FILE',
+        command.add_argument('--coefficients', type=input_file, metavar='FILE',
                              help='influence coefficients (from calibrate or influence -o)')
         command.add_argument('--readings', nargs='+', metavar='A',
                              help='readings by hand instead of a run, AMPLITUDE@PHASE_DEG, one '
@@ -137,11 +141,12 @@ def register(commands):
                              help='weights bolted on already, kg, at a site angle in degrees '
                              'or #HOLE (I:15:0.2 II:#7:0.05): the plan says what to add and '
                              'what to take off, with the fewest changes')
-        command.add_argument('--speed', type=positive, metavar='W',
+        command.add_argument('--speed', type=within(limits.SPEED), metavar='W',
                              help="the run's (or readings') steady speed, rad/s (default: the "
                              "coefficients'; load cells' coefficients are scaled as the speed "
                              'squared)')
-        command.add_argument('--layout', '--layout-file', metavar='FILE', dest='layout',
+        command.add_argument('--layout', '--layout-file', type=input_file, metavar='FILE',
+                             dest='layout',
                              help="layout with balancing.sites (default: the bag's)")
         command.add_argument('--objective', choices=('fewest', 'residual'),
                              help='fewest weights within the grade (default with a grade '
@@ -149,10 +154,11 @@ def register(commands):
         command.add_argument('--limit', type=positive, metavar='X',
                              help='largest residual reading allowed (the sensors\' unit), '
                              'with --coefficients')
-        command.add_argument('--max-weights', type=count, metavar='N',
+        command.add_argument('--max-weights', type=within(limits.MAX_WEIGHTS), metavar='N',
                              help='most weights in the plan (default for --objective '
                              'residual: two per plane with sites)')
-        command.add_argument('--time-limit', type=positive, default=30.0, metavar='S',
+        command.add_argument('--time-limit', type=within(limits.TIME_LIMIT), default=30.0,
+                             metavar='S',
                              help='seconds the mixed-integer search may take (default 30)')
         command.add_argument('--segment', type=segment_number, metavar='N',
                              help='layout segment to read (default: the one with the longest '
@@ -160,7 +166,8 @@ def register(commands):
         _accept_mismatch(command)
         _run_options(command)
         if name == 'report':
-            command.add_argument('--after', metavar='BAG', help='a check run after the '
+            command.add_argument('--after', type=input_bag, metavar='BAG',
+                                 help='a check run after the '
                                  'weights went on: its identified unbalance is shown too')
             command.add_argument('-o', '--output', required=True, metavar='DIR',
                                  help='directory for report.html and its figures')
@@ -185,7 +192,8 @@ def _accept_mismatch(command):
 
 
 def _run_options(command):
-    command.add_argument('--speed-tolerance', type=positive, default=1.0, metavar='PERCENT',
+    command.add_argument('--speed-tolerance', type=within(limits.SPEED_TOLERANCE), default=1.0,
+                         metavar='PERCENT',
                          help='speeds within this of the steady speed count as steady '
                          '(default 1 %%)')
     command.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
@@ -201,11 +209,10 @@ def warn(lines):
 
 def run_calibrate(args):
     """Run ``cvc-balance calibrate``."""
-    import yaml
-
     from cvc_balance.bag.field_run import calibrate_runs, check_calibration
     from cvc_balance.field.coefficients import calibration_mapping
     from cvc_balance.field.notation import bag_trial
+    from cvc_balance.physics.documents import dump_document
 
     trials = [bag_trial(text) for text in args.trial]
     if len(args.runs) < 2:
@@ -231,7 +238,7 @@ def run_calibrate(args):
     if args.output:
         with replaced_when_done(args.output) as path:
             path.write_text('# Influence coefficients (cvc-balance calibrate; README "Field '
-                            'balancing")\n' + yaml.safe_dump(record, sort_keys=False))
+                            'balancing")\n' + dump_document(record))
     if args.json:
         print_json(record)
     else:
@@ -415,13 +422,13 @@ def run_trial_weight(args):
 def run_influence(args):
     """Run ``cvc-balance influence``."""
     import numpy as np
-    import yaml
 
     from cvc_balance.bag.field_run import permissible_unbalance
     from cvc_balance.field import calibrate, continuous_correction, problem_from_readings
     from cvc_balance.field.coefficients import calibration_mapping
     from cvc_balance.field.model_check import check_coefficients, ModelCheck
     from cvc_balance.field.notation import hand_trial, reading
+    from cvc_balance.physics.documents import dump_document
 
     baseline = [reading(text, f'baseline reading {k + 1}') for k, text in
                 enumerate(args.baseline)]
@@ -510,7 +517,7 @@ def run_influence(args):
         with replaced_when_done(args.output) as path:
             path.write_text('# Influence coefficients (cvc-balance influence, readings by hand; '
                             'README "Field balancing")\n'
-                            + yaml.safe_dump(plain(record), sort_keys=False))
+                            + dump_document(plain(record)))
         summary['written'] = args.output
     if args.json:
         print_json(summary)
@@ -542,19 +549,11 @@ def run_influence(args):
 # -- correct and report ------------------------------------------------------------------
 
 def read_coefficients(path):
-    """Return (Calibration, record) of a coefficient file (YAML or JSON)."""
+    """Return (Calibration, record) of a coefficient file (YAML 1.2 or JSON, regular file)."""
     from cvc_balance.field.coefficients import calibration_from_mapping
-    from cvc_balance.physics.layout_file import _parse     # the hardened YAML/JSON reader
+    from cvc_balance.physics.documents import read_document
 
-    with open(path, 'rb') as stream:
-        data = stream.read(MAX_RECORD_BYTES + 1)
-    if len(data) > MAX_RECORD_BYTES:
-        raise ValueError(f'{path}: over {MAX_RECORD_BYTES} bytes: not a coefficient record')
-    try:
-        text = data.decode('utf-8')
-    except UnicodeDecodeError:
-        raise ValueError(f'{path}: not UTF-8 text') from None
-    return calibration_from_mapping(_parse(text, str(path)), str(path))
+    return calibration_from_mapping(read_document(path, MAX_RECORD_BYTES), str(path))
 
 
 def correction_summary(args):

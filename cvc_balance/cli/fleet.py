@@ -14,7 +14,8 @@ import math
 from pathlib import Path
 import sys
 
-from cvc_balance.cli.arguments import count, positive, print_json
+from cvc_balance.cli.arguments import add_bounded, input_file, input_path, print_json
+from cvc_balance.physics import limits
 
 
 def register(commands):
@@ -25,7 +26,8 @@ def register(commands):
         'each one not yet in RESULTS (same content digest) on Dask workers, and add a row per '
         'run and layout segment to RESULTS (Parquet); bags that fail are listed with the '
         'reason in RESULTS.failures.parquet and the run goes on.')
-    fleet.add_argument('paths', nargs='+', metavar='PATH', help='bags or folders of bags')
+    fleet.add_argument('paths', nargs='+', type=input_path, metavar='PATH',
+                       help='bags or folders of bags')
     fleet.add_argument('--out', required=True, metavar='RESULTS',
                        help='the results table (.parquet), made or added to')
     fleet.add_argument('--engine', choices=('dask', 'local'), default='dask',
@@ -34,11 +36,11 @@ def register(commands):
     fleet.add_argument('--scheduler', metavar='ADDRESS',
                        help="an existing Dask scheduler (tcp://host:8786) whose workers see "
                        "the same paths and have cvc_balance installed")
-    fleet.add_argument('--workers', type=count, metavar='N',
-                       help='LocalCluster worker processes (default: the cores, at most 2)')
-    fleet.add_argument('--batch', type=count, metavar='N',
-                       help='bags per task (default: small bags together, up to ~4 MB and '
-                       '16 bags a task; large ones alone)')
+    add_bounded(fleet, '--workers', limit=limits.WORKERS, metavar='N',
+                help='LocalCluster worker processes (default: the cores, at most 2)')
+    add_bounded(fleet, '--batch', limit=limits.BATCH, metavar='N',
+                help='bags per task (default: small bags together, up to ~4 MB and 16 bags a '
+                'task; large ones alone)')
     fleet.add_argument('--retry-failures', action='store_true',
                        help='analyse again the bags listed as failed before')
     fleet.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
@@ -52,14 +54,16 @@ def register(commands):
         "from load cells where there are some, else the layout's) against its grade, a drift "
         'fitted across layout changes with its 95 %% interval, and the date it is projected '
         'to leave the grade; the machines ranked by urgency.')
-    trends.add_argument('results', metavar='RESULTS', help='a table written by fleet')
+    trends.add_argument('results', type=input_path, metavar='RESULTS',
+                        help='a table written by fleet')
     trends.add_argument('--machine', metavar='M', help='only this machine')
     trends.add_argument('-o', '--output', metavar='DIR', help='write a chart per machine '
                         '(DIR/<machine>.png), the urgency chart (DIR/fleet.png) and the '
                         'table (DIR/trends.csv)')
     trends.add_argument('--now', type=_date, metavar='DATE', help='project from this date '
                         '(ISO 8601, UTC; default: each machine\'s last run)')
-    trends.add_argument('--top', type=count, metavar='N', help='list only the N most urgent')
+    add_bounded(trends, '--top', limit=limits.TOP, metavar='N',
+                help='list only the N most urgent')
     trends.add_argument('--json', action='store_true', help='print one JSON object')
     trends.set_defaults(run=_trends)
 
@@ -68,20 +72,21 @@ def register(commands):
         description='Write N machines x M runs (daily checks with load cells) over DAYS days '
         'as bags under DIR/<machine>/ (.mcap files and rosbag2 directories), each stamped with '
         'its machine id and date: slipping counterweights, tube swaps, steady machines.')
-    simulate.add_argument('layout', metavar='LAYOUT', help='layout of every machine (with '
-                          'components counterweight_rear and xray_tube)')
+    simulate.add_argument('layout', type=input_file, metavar='LAYOUT',
+                          help='layout of every machine (with components counterweight_rear '
+                          'and xray_tube)')
     simulate.add_argument('-o', '--output', required=True, metavar='DIR')
-    simulate.add_argument('--machines', type=count, default=20, metavar='N')
-    simulate.add_argument('--runs', type=count, default=5, metavar='M')
-    simulate.add_argument('--days', type=positive, default=180.0, metavar='DAYS')
+    add_bounded(simulate, '--machines', limit=limits.MACHINES, default=20, metavar='N')
+    add_bounded(simulate, '--runs', limit=limits.RUNS, default=5, metavar='M')
+    add_bounded(simulate, '--days', limit=limits.DAYS, default=180.0, metavar='DAYS')
     simulate.add_argument('--start', type=_date, default=datetime(2026, 1, 5, 8,
                                                                   tzinfo=timezone.utc),
                           metavar='DATE', help='first run (ISO 8601, UTC)')
-    simulate.add_argument('--seed', type=int, default=0)
-    simulate.add_argument('--rate', type=positive, default=100.0, metavar='HZ',
-                          help='encoder samples/s (default 100)')
-    simulate.add_argument('--cell-rate', type=positive, default=100.0, metavar='HZ',
-                          help='load-cell readings/s (default 100)')
+    add_bounded(simulate, '--seed', limit=limits.SEED, default=0, metavar='S')
+    add_bounded(simulate, '--rate', limit=limits.SAMPLE_RATE, default=100.0, metavar='HZ',
+                help='encoder samples/s (default 100)')
+    add_bounded(simulate, '--cell-rate', limit=limits.SAMPLE_RATE, default=100.0,
+                metavar='HZ', help='load-cell readings/s (default 100)')
     simulate.set_defaults(run=_simulate)
 
 
@@ -205,9 +210,9 @@ def _write_outputs(directory, trends, rows):
 
 
 def _simulate(args):
-    import yaml
     from cvc_balance.files import check_output
     from cvc_balance.fleet.simulate import simulate_fleet
+    from cvc_balance.physics.documents import dump_document
     check_output(args.output, [args.layout], directory=True)     # before the work
     plans = simulate_fleet(args.layout, args.output, args.machines, args.runs, args.days,
                            args.start.replace(tzinfo=None).isoformat(), args.seed, args.rate,
@@ -218,7 +223,7 @@ def _simulate(args):
               'tube_extra_kg': p.tube_extra_kg, 'as_built': p.as_built,
               'runs': [str(r.path) for r in p.runs]} for p in plans]
     plan_path = Path(args.output) / 'fleet_plan.yaml'
-    plan_path.write_text(yaml.safe_dump({'machines': truth}, sort_keys=False),
+    plan_path.write_text(dump_document({'machines': truth}),
                          encoding='utf-8')
     runs = sum(len(p.runs) for p in plans)
     print(f'{args.output}: {len(plans)} machines, {runs} runs over {args.days:g} days '

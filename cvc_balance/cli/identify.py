@@ -11,8 +11,10 @@ as a result when there is none.
 
 import sys
 
-from cvc_balance.cli.arguments import (add_input_topics, BAG_HELP, count, EXIT_BAD_INPUT,
-                                       EXIT_FAILURE, input_topics, print_json)
+from cvc_balance.cli.arguments import (add_bounded, add_input_topics, BAG_HELP, EXIT_BAD_INPUT,
+                                       EXIT_FAILURE, input_bag, input_file, input_topics,
+                                       print_json)
+from cvc_balance.physics import limits
 
 
 def register(commands):
@@ -23,14 +25,14 @@ def register(commands):
         'of a bag to its load-cell readings (supports/<name>/measured_load), judge the '
         'measured rotor against its grade, and compare it with what the layout declares. '
         'Never across a layout change: one fit per segment.')
-    identify.add_argument('bag', metavar='BAG', help=BAG_HELP)
-    identify.add_argument('--layout-file', metavar='FILE',
+    identify.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
+    identify.add_argument('--layout-file', type=input_file, metavar='FILE',
                           help="the declared layout for the whole run instead of the bag's")
     add_input_topics(identify)
-    identify.add_argument('--window-revs', type=count, metavar='N',
-                          help='fit only the last N revolutions of each segment (default: all)')
-    identify.add_argument('--segment', type=count, metavar='N',
-                          help='report only layout segment N (1 = the first; default: all)')
+    add_bounded(identify, '--window-revs', limit=limits.WINDOW_REVS, metavar='N',
+                help='fit only the last N revolutions of each segment (default: all)')
+    add_bounded(identify, '--segment', limit=limits.SEGMENT, metavar='N',
+                help='report only layout segment N (1 = the first; default: all)')
     identify.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
     identify.add_argument('--json', action='store_true', help='print one JSON object')
     identify.set_defaults(run=run)

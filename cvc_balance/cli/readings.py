@@ -7,7 +7,9 @@ them; no encoder, layout or load cell needed (:mod:`cvc_balance.bag.readings`).
 
 import sys
 
-from cvc_balance.cli.arguments import BAG_HELP, finite, positive, print_json, topic_name
+from cvc_balance.cli.arguments import (add_bounded, BAG_HELP, finite, input_bag, print_json,
+                                       topic_name)
+from cvc_balance.physics import limits
 
 
 def register(commands):
@@ -26,7 +28,7 @@ def register(commands):
         epilog='JSON (--json): {"segments": [{"from", "to" (s, the keyphasor\'s clock), '
         '"speed" (rad/s), "revolutions", "channels": [{"name", "unit", "amplitude", '
         '"phase_deg", "ci95"}]}]}')
-    readings.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    readings.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
     readings.add_argument('--keyphasor', type=topic_name, metavar='TOPIC',
                           help='the once-per-revolution mark: std_msgs/Float64 (a sampled '
                           'tach signal, each sample at its log time) or sensor_msgs/'
@@ -42,9 +44,9 @@ def register(commands):
                           help="a channel's unit, e.g. accel=m/s^2 or probe=counts "
                           "(repeat for each topic; default: an Imu's m/s^2, others 'as "
                           "recorded')")
-    readings.add_argument('--speed-tolerance', type=positive, default=1.0, metavar='PERCENT',
-                          help='a stretch is steady while every mark\'s speed (over 8 '
-                          'revolutions) is within this of the stretch\'s (default 1 %%)')
+    add_bounded(readings, '--speed-tolerance', limit=limits.SPEED_TOLERANCE, default=1.0,
+                metavar='PERCENT', help='a stretch is steady while every mark\'s speed (over 8 '
+                'revolutions) is within this of the stretch\'s (default 1 %%)')
     readings.add_argument('--json', action='store_true', help='print one JSON object')
     readings.set_defaults(run=run)
 

@@ -1,6 +1,6 @@
 """``cvc-balance reindex BAG``: mend a killed or damaged recording (as ros2 bag reindex)."""
 
-from cvc_balance.cli.arguments import BAG_HELP
+from cvc_balance.cli.arguments import BAG_HELP, input_bag
 
 
 def register(commands):
@@ -14,7 +14,7 @@ def register(commands):
         'a name not taken), or to -o, or over it with --in-place; refused, the bag left as it '
         'is, when the mcap library (CRCs checked) or rosbags reads more messages of a topic '
         'from the bag than the result keeps.')
-    reindex.add_argument('bag', metavar='BAG', help=BAG_HELP)
+    reindex.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
     where = reindex.add_mutually_exclusive_group()
     where.add_argument('-o', '--output', metavar='OUT',
                        help='write the reindexed bag here (default: beside BAG)')

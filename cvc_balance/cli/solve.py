@@ -7,7 +7,8 @@ A table for people or, with ``--json``, one object for programs.
 import math
 import sys
 
-from cvc_balance.cli.arguments import finite, print_json, tolerance
+from cvc_balance.cli.arguments import add_bounded, input_file, print_json, tolerance
+from cvc_balance.physics import limits
 from cvc_balance.physics.assessment import judge_balance, verdict_record
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees, g_mm, g_mm2, radians, ROTOR_FRAME, STATOR_FRAME
@@ -22,15 +23,16 @@ def register(commands):
     solve = commands.add_parser('solve', help='loads and unbalance for one motion sample',
                                 description='Loads on the stator, per support, drive torque '
                                 'and unbalance for one motion sample of a layout.')
-    solve.add_argument('layout', metavar='LAYOUT', help='layout file (YAML or JSON)')
-    solve.add_argument('--omega', type=finite, required=True, metavar='W',
-                       help='rotor speed, rad/s (about +Z)')
-    solve.add_argument('--alpha', type=finite, default=0.0, metavar='A',
-                       help='rotor angular acceleration, rad/s^2 (default 0)')
-    solve.add_argument('--angle-deg', type=finite, default=0.0, metavar='Q',
-                       help='rotor angle q from stator X to rotor X, degrees (default 0)')
-    solve.add_argument('--gravity', type=finite, nargs=3, metavar=('GX', 'GY', 'GZ'),
-                       help="gravity in the stator frame, m/s^2 (default: the layout's)")
+    solve.add_argument('layout', type=input_file, metavar='LAYOUT',
+                       help='layout file (YAML or JSON)')
+    add_bounded(solve, '--omega', limit=limits.OMEGA, required=True, metavar='W',
+                help='rotor speed, rad/s (about +Z)')
+    add_bounded(solve, '--alpha', limit=limits.ACCELERATION, default=0.0, metavar='A',
+                help='rotor angular acceleration, rad/s^2 (default 0)')
+    add_bounded(solve, '--angle-deg', limit=limits.ANGLE_DEG, default=0.0, metavar='Q',
+                help='rotor angle q from stator X to rotor X, degrees (default 0)')
+    add_bounded(solve, '--gravity', limit=limits.GRAVITY, nargs=3, metavar=('GX', 'GY', 'GZ'),
+                help="gravity in the stator frame, m/s^2 (default: the layout's)")
     solve.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
                        help='largest change accepted in the forces (N), moments (N m) and '
                        'drive torque (N m), inf for an output not asked: take the smallest '

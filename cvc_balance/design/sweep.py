@@ -25,15 +25,16 @@ from cvc_balance.design.balance_point import solve_balance
 from cvc_balance.design.parameters import own_products, PARAMETERS, with_values
 from cvc_balance.design.sensitivity import (aggregate_derivatives, component_aggregates,
                                             judged_vectors, norm_slopes, support_vectors)
+from cvc_balance.physics import limits
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import own_tensors_of, RotorModel
 from cvc_balance.physics.frames import products_of_inertia
 from cvc_balance.physics.inertia import place
 from cvc_balance.physics.unbalance import couple_unbalance
 
-MAX_POINTS = 2001
+MAX_POINTS = limits.POINTS.high
 """Most grid points along one parameter; a map takes at most MAX_MAP_POINTS a side."""
-MAX_MAP_POINTS = 501
+MAX_MAP_POINTS = limits.MAP_POINTS
 
 
 @dataclass(frozen=True)

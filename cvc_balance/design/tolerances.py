@@ -18,17 +18,19 @@ angle tolerance over 180 deg are errors (:class:`ToleranceError`, one line).
 """
 
 from dataclasses import dataclass
-import json
 import math
 
 import numpy as np
-import yaml
 
 from cvc_balance.design.parameters import PARAMETERS
+from cvc_balance.physics import limits
+from cvc_balance.physics.documents import DocumentError, load_document, read_document
 from cvc_balance.physics.frames import degrees, radians
 
 DISTRIBUTIONS = ('normal', 'uniform')
 FIELDS = ('mass', 'radius', 'angle_deg', 'angle', 'z', 'distribution')
+MAX_BYTES = 64 * 2**20
+"""Largest tolerance file, bytes (a line per component of the largest layouts)."""
 TRUNCATION = 3.0
 """A normal tolerance is TRUNCATION sigma, and draws beyond it are rejected parts."""
 
@@ -115,30 +117,25 @@ def tolerances_from_mapping(data, layout, source='tolerances'):
 
 
 def tolerances_from_text(text, layout, source='tolerances'):
-    """Parse YAML or JSON text into :class:`Tolerances` for ``layout``."""
+    """Parse YAML 1.2 or JSON text (keys once) into :class:`Tolerances` for ``layout``."""
     try:
-        data = json.loads(text)
-    except ValueError:
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as error:
-            mark = getattr(error, 'problem_mark', None)
-            where = f' line {mark.line + 1}' if mark is not None else ''
-            problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
-            raise ToleranceError(f'{source}:{where}: not valid YAML or JSON: {problem}') from None
+        data = load_document(text)
+    except DocumentError as error:
+        raise ToleranceError(f'{source}: {error}') from None
     return tolerances_from_mapping(data, layout, source)
 
 
 def load_tolerances(path, layout):
-    """Read and validate the tolerance file at ``path`` for ``layout``."""
+    """Read and validate the tolerance file at ``path`` (a regular file) for ``layout``."""
     try:
-        with open(path, encoding='utf-8') as stream:
-            text = stream.read()
+        data = read_document(path, MAX_BYTES)
     except OSError as error:
         raise ToleranceError(f'{path}: cannot read tolerance file: {error.strerror}') from None
-    except UnicodeDecodeError:
-        raise ToleranceError(f'{path}: tolerance file is not UTF-8 text') from None
-    return tolerances_from_text(text, layout, str(path))
+    except DocumentError as error:
+        message = str(error)
+        raise ToleranceError(message if message.startswith(str(path)) else f'{path}: {message}') \
+            from None
+    return tolerances_from_mapping(data, layout, str(path))
 
 
 def describe(tolerances, index, column):
@@ -166,7 +163,8 @@ def _entry(spec, where):
     entry = {}
     for key in ('mass', 'radius', 'angle_deg', 'angle', 'z'):
         if key in spec:
-            entry[key] = _tolerance(spec[key], f'{where}: field {key}')
+            entry[key] = _tolerance(spec[key], f'{where}: field {key}',
+                                    limits.LENGTH_TOLERANCE if key in ('radius', 'z') else None)
     if 'angle_deg' in entry:
         entry['angle'] = radians(entry.pop('angle_deg'))
     if entry.get('angle', 0.0) > math.pi:
@@ -181,14 +179,20 @@ def _entry(spec, where):
     return entry
 
 
-def _tolerance(value, where):
+def _tolerance(value, where, limit=None):
+    """Return a +- tolerance: a finite number >= 0, within ``limit`` (a limits.Limit)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ToleranceError(f'{where} must be a number, got {_kind(value)} {value!r}')
-    value = float(value)
+        raise ToleranceError(f'{where} must be a number, got {_kind(value)} {value!r}'[:300])
+    try:
+        value = float(value)
+    except OverflowError:                             # an integer of hundreds of digits
+        value = math.inf
     if not math.isfinite(value):
         raise ToleranceError(f'{where} must be finite, got {value}')
     if value < 0.0:
         raise ToleranceError(f'{where} must be >= 0 (a +- tolerance), got {value:g}')
+    if limit is not None:
+        limits.check(value, limit, where, ToleranceError)
     return value
 
 

@@ -29,9 +29,10 @@ from pathlib import Path
 import tempfile
 
 import numpy as np
-import yaml
 
 from cvc_balance.bag.scenario import load_scenario, write_bag
+from cvc_balance.physics.documents import dump_document, read_document
+from cvc_balance.physics.layout_file import MAX_TEXT_BYTES
 
 KINDS = ('slipping counterweight', 'tube swap', 'both', 'steady')
 TUBE_STEP = 0.5
@@ -73,8 +74,10 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
     ``counterweight`` and ``tube``); ``days``: span of the runs; ``start``: the first
     run's date (ISO 8601, UTC); ``rate``, ``cell_rate``: encoder and load-cell samples/s.
     """
-    layout = yaml.safe_load(Path(layout_path).read_text(encoding='utf-8'))
-    names = [c.get('name') for c in layout.get('components', [])]
+    layout = read_document(layout_path, MAX_TEXT_BYTES)
+    if not isinstance(layout, dict) or not isinstance(layout.get('components'), list):
+        raise ValueError(f'{layout_path}: not a layout (a mapping with a list of components)')
+    names = [c.get('name') for c in layout['components'] if isinstance(c, dict)]
     for name in (counterweight, tube):
         if name not in names:
             raise ValueError(f'{layout_path}: no component {name!r} (the simulated fleet '
@@ -102,7 +105,7 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
                 spec = _scenario(plan, declared, true, when, rate, cell_rate, speed,
                                  seed * 100003 + i * 101 + k)
                 spec_path = Path(scratch) / 'run.yaml'
-                spec_path.write_text(yaml.safe_dump(spec, sort_keys=False), encoding='utf-8')
+                spec_path.write_text(dump_document(spec), encoding='utf-8')
                 write_bag(load_scenario(spec_path), path, machine_id=plan.machine_id)
                 plan.runs.append(RunPlan(path, when, declared,
                                          true['components']))

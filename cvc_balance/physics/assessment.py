@@ -19,7 +19,7 @@ speed to judge at.
 
 from dataclasses import dataclass
 
-from cvc_balance.physics import iso21940
+from cvc_balance.physics import iso21940, limits
 from cvc_balance.physics.frames import degrees_360, g_mm, polar
 from cvc_balance.physics.unbalance import couple_unbalance, plane_unbalances, static_unbalance
 
@@ -111,13 +111,15 @@ def judging_speed(layout, top_speed=0.0):
     Return (speed rad/s, source) at which ``layout``'s balance is judged.
 
     The layout's service speed if it names one, else ``top_speed`` (the top
-    |omega| seen, rad/s) if > 0; (None, None) when there is neither.
+    |omega| seen, rad/s) if it is a speed a grade means something at (at least
+    :data:`limits.SPEED`'s 1e-3 rad/s: slower, U_per = G m / omega has no bound);
+    (None, None) when there is neither.
     """
     service = layout.balancing.service_speed
     if service is not None and service > 0.0:
         return service, SERVICE_SPEED
     top = abs(top_speed)
-    if top > 0.0:
+    if top >= limits.SPEED.low:
         return top, TOP_SPEED
     return None, None
 

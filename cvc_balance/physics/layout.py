@@ -18,7 +18,9 @@ import re
 
 import numpy as np
 
+from cvc_balance.physics import limits
 from cvc_balance.physics.frames import DEFAULT_GRAVITY, radians, tensor_from_elements
+from cvc_balance.physics.limits import MAX_ANGLE, MAX_MAGNITUDE  # noqa: F401 (for field/)
 
 SHAPE_FIELDS = {
     'point': (),
@@ -34,10 +36,6 @@ DEFAULT_GRADE = 6.3
 """ISO 21940-11 grade (mm/s) when a layout names none: general machinery."""
 MAX_COMPONENTS = 2_000_000
 """Most components a layout may have (aggregating 10^6 is the tested extreme)."""
-MAX_MAGNITUDE = 1e12
-"""Largest magnitude of any number (kg, m, kg m^2, m/s^2, rad/s, mm/s): products stay finite."""
-MAX_ANGLE = 1e9
-"""Largest |angle|, rad: within it the angles' reduction is exact (1e-32, measured to 1e12)."""
 MAX_NAME = 200
 """Longest name of a layout, component or support, characters."""
 SITE_PLANES = ('I', 'II')
@@ -256,15 +254,20 @@ class Layout:
         Radius (m) at which correction masses go.
 
         Default: the largest component radius; when every component is centred on the
-        axis, the largest half-extent of their shapes (a drum's rim); 0 when they are all
-        points on the axis (then no correction mass can be given).
+        axis (within :data:`limits.DIVISOR_RADIUS`'s micrometre), the largest half-extent of
+        their shapes (a drum's rim); 0 when there is none of a micrometre either (then no
+        correction mass can be given).
         """
         if self.balancing.correction_radius is not None:
             return self.balancing.correction_radius
+        # A radius a mass is divided by: below its limit (a micrometre) there is no rim.
+        least = limits.DIVISOR_RADIUS.low
         radius = float(self.placement[1].max())
-        if radius > 0.0:
+        if radius >= least:
             return radius
-        return max(c.shape.extent / 2 if c.shape is not None else 0.0 for c in self.components)
+        radius = max((c.shape.extent / 2 for _, c in self.bodies if c.shape is not None),
+                     default=0.0)
+        return radius if radius >= least else 0.0
 
 
 def _json_string(text):
@@ -293,20 +296,45 @@ def parse_layout(data):
 
     Raises :class:`LayoutError` naming the first thing that is wrong.
     """
-    _mapping(data, 'layout')
-    _known_keys(data, _LAYOUT_FIELDS, 'layout')
-    # The name first (its error before any component's); kept by layout_with_components.
-    _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
-    components = _list(_required(data, 'components', 'layout'), 'layout: field components')
-    if not components:
-        raise LayoutError('layout: field components: needs at least one component')
-    if len(components) > MAX_COMPONENTS:
-        raise LayoutError(f'layout: field components: {len(components)} components, over the '
-                          f'limit of {MAX_COMPONENTS}')
+    components = check_head(data)
+    _list(components, 'layout: field components')
+    check_count(len(components))
     parsed = tuple(_plain_component(item) or _component(item, i)
                    for i, item in enumerate(components))
-    _unique([c.name for c in parsed], 'component')
+    unique_names([c.name for c in parsed])
     return layout_with_components(data, parsed)
+
+
+def check_head(data):
+    """
+    Check what a layout mapping says before its components: a mapping, known fields, a name.
+
+    Returns its field ``components`` (not checked). Raises :class:`LayoutError`: the name's
+    error comes before any component's (the name is kept by :func:`layout_with_components`).
+    """
+    _mapping(data, 'layout')
+    _known_keys(data, _LAYOUT_FIELDS, 'layout')
+    _text(_required(data, 'name', 'layout'), 'layout: field name', limit=MAX_NAME)
+    return _required(data, 'components', 'layout')
+
+
+def check_count(count):
+    """Refuse a layout of ``count`` components unless 1 <= count <= MAX_COMPONENTS."""
+    if count < 1:
+        raise LayoutError('layout: field components: needs at least one component')
+    if count > MAX_COMPONENTS:
+        raise LayoutError(f'layout: field components: {count} components, over the '
+                          f'limit of {MAX_COMPONENTS}')
+
+
+def unique_names(names):
+    """Refuse components' ``names`` (a list) when one is given twice, naming it."""
+    _unique(names, 'component')
+
+
+def component(item, index):
+    """Validate component ``item`` (a mapping; ``index`` from 0) into a Component."""
+    return _plain_component(item) or _component(item, index)
 
 
 def layout_with_components(data, components):
@@ -324,7 +352,7 @@ def layout_with_components(data, components):
     supports = _supports(_required(data, 'supports', 'layout'))
     gravity = DEFAULT_GRAVITY
     if 'gravity' in data:
-        gravity = _vector(data['gravity'], 3, 'layout: field gravity')
+        gravity = _vector(data['gravity'], 3, 'layout: field gravity', limits.GRAVITY)
     balancing = _balancing(data.get('balancing', {}))
     if balancing.sites and balancing.planes is None and len(supports) != 2:
         raise LayoutError('layout: field balancing.sites: weight sites need two correction '
@@ -361,8 +389,8 @@ def _plain_component(item):
         mass, radius, angle, z = float(mass), float(radius), float(angle), float(z)
     except OverflowError:                  # an integer of hundreds of digits
         return None
-    if not (0.0 < mass <= MAX_MAGNITUDE and 0.0 <= radius <= MAX_MAGNITUDE
-            and -MAX_ANGLE <= angle <= MAX_ANGLE and -MAX_MAGNITUDE <= z <= MAX_MAGNITUDE):
+    if not (limits.MASS.contains(mass) and limits.RADIUS.contains(radius)
+            and limits.ANGLE.contains(angle) and limits.POSITION.contains(z)):
         return None
     return point_mass(name, mass, radius, angle, z)
 
@@ -381,10 +409,15 @@ def plain_columns(names, mass, radius, angle, z):
     lengths = np.fromiter(map(len, names), dtype=np.int64, count=n)
     joined = ''.join(names)
     return bool(lengths.min() > 0 and lengths.max() <= MAX_NAME and joined.isprintable()
-                and np.all((mass > 0.0) & (mass <= MAX_MAGNITUDE))
-                and np.all((radius >= 0.0) & (radius <= MAX_MAGNITUDE))
-                and np.all(np.abs(angle) <= MAX_ANGLE) and np.all(np.abs(z) <= MAX_MAGNITUDE)
-                and len(set(names)) == n)
+                and np.all(plain_rows(mass, radius, angle, z)) and len(set(names)) == n)
+
+
+def plain_rows(mass, radius, angle, z):
+    """Tell, row by row, whether point masses' numbers (float arrays) are within limits."""
+    def within(values, limit):
+        return (values >= limit.low) & (values <= limit.high)      # NaN: False
+    return within(mass, limits.MASS) & within(radius, limits.RADIUS) \
+        & within(angle, limits.ANGLE) & within(z, limits.POSITION)
 
 
 def point_mass(name, mass, radius, angle, z, shape=None, inertia=None):
@@ -408,9 +441,9 @@ def _component(item, index):
         where = f"component {short(item['name'])}"
     _known_keys(item, _COMPONENT_FIELDS, where)
     name = _text(_required(item, 'name', where), f'{where}: field name', limit=MAX_NAME)
-    mass = _number(_required(item, 'mass', where), f'{where}: field mass', minimum=0.0,
-                   strict=True)
-    radius = _number(_required(item, 'radius', where), f'{where}: field radius', minimum=0.0)
+    mass = _number(_required(item, 'mass', where), f'{where}: field mass', limits.MASS)
+    radius = _number(_required(item, 'radius', where), f'{where}: field radius',
+                     limits.RADIUS)
     angle = _angle(item, where)
     z = _number(item.get('z', 0.0), f'{where}: field z')
     return Component(name, mass, radius, angle, z, *_own_inertia(item, where))
@@ -436,9 +469,8 @@ def _angle(item, where):
     if ('angle' in item) == ('angle_deg' in item):
         raise LayoutError(f'{where}: give exactly one of fields angle (rad) and angle_deg')
     if 'angle' in item:
-        return _number(item['angle'], f'{where}: field angle', bound=MAX_ANGLE)
-    return radians(_number(item['angle_deg'], f'{where}: field angle_deg',
-                           bound=math.degrees(MAX_ANGLE)))
+        return _number(item['angle'], f'{where}: field angle', limits.ANGLE)
+    return radians(_number(item['angle_deg'], f'{where}: field angle_deg', limits.ANGLE_DEG))
 
 
 def _own_inertia(item, where):
@@ -469,7 +501,7 @@ def _plain_shape(spec):
         value = spec.get(key)
         numbers = value if key == 'size' and type(value) is list and len(value) == 3 \
             else (value,)
-        if not all(type(v) in _FLOAT and 0.0 < v <= MAX_MAGNITUDE for v in numbers):
+        if not all(type(v) in _FLOAT and limits.SHAPE_LENGTH.contains(v) for v in numbers):
             return None
         values[key] = tuple(map(float, numbers)) if key == 'size' else float(value)
     if kind == 'tube' and not values['inner_radius'] < values['outer_radius']:
@@ -493,10 +525,10 @@ def _shape(spec, where):
         field = f'{where}: field shape.{key}'
         if key == 'size':
             values[key] = _vector(_required(spec, key, f'{where}: field shape'), 3, field,
-                                  minimum=0.0)
+                                  limits.SHAPE_LENGTH)
         else:
             values[key] = _number(_required(spec, key, f'{where}: field shape'), field,
-                                  minimum=0.0, strict=True)
+                                  limits.SHAPE_LENGTH)
     if kind == 'tube' and not values['inner_radius'] < values['outer_radius']:
         raise LayoutError(f'{where}: field shape.inner_radius must be less than outer_radius')
     if 'axis' in spec and (not isinstance(spec['axis'], str) or spec['axis'] not in AXES):
@@ -509,7 +541,8 @@ def _inertia(spec, where):
     _mapping(spec, f'{where}: field inertia')
     _known_keys(spec, INERTIA_FIELDS, f'{where}: field inertia')
     values = tuple(_number(_required(spec, k, f'{where}: field inertia'),
-                           f'{where}: field inertia.{k}') for k in INERTIA_FIELDS)
+                           f'{where}: field inertia.{k}', limits.INERTIA)
+                   for k in INERTIA_FIELDS)
     _check_physical(values, where)
     return values
 
@@ -550,6 +583,8 @@ def _supports(value):
     if len(supports) == 2:
         if supports[0].z == supports[1].z:
             raise LayoutError('layout: field supports: the two supports need different z')
+        limits.check(abs(supports[1].z - supports[0].z), limits.SPACING,
+                     'layout: field supports: the spacing of the two supports', LayoutError)
         if sum(s.axial for s in supports) != 1:
             raise LayoutError('layout: field supports: mark exactly one of the two supports '
                               'axial: true (it takes the axial force)')
@@ -562,20 +597,22 @@ def _balancing(spec):
                 'layout: field balancing')
     planes = None
     if 'planes' in spec:
-        planes = _vector(spec['planes'], 2, 'layout: field balancing.planes')
+        planes = _vector(spec['planes'], 2, 'layout: field balancing.planes', limits.POSITION)
         if not planes[0] < planes[1]:
             raise LayoutError('layout: field balancing.planes: give [z_I, z_II] with '
                               'z_I < z_II')
+        limits.check(planes[1] - planes[0], limits.SPACING,
+                     'layout: field balancing.planes: the spacing z_II - z_I', LayoutError)
     radius = None
     if 'correction_radius' in spec:
         radius = _number(spec['correction_radius'], 'layout: field balancing.correction_radius',
-                         minimum=0.0, strict=True)
+                         limits.DIVISOR_RADIUS)
     grade = _number(spec.get('grade', DEFAULT_GRADE), 'layout: field balancing.grade',
-                    minimum=0.0, strict=True)
+                    limits.GRADE)
     speed = None
     if 'service_speed' in spec:
         speed = _number(spec['service_speed'], 'layout: field balancing.service_speed',
-                        minimum=0.0, strict=True)
+                        limits.SPEED)
     sites = _sites(spec['sites']) if 'sites' in spec else ()
     return Balancing(planes, radius, grade, speed, sites)
 
@@ -606,19 +643,19 @@ def _plane_sites(spec, plane):
         raise LayoutError(f'{where}: give exactly one of fields angles (rad) and angles_deg')
     key = 'angles' if 'angles' in spec else 'angles_deg'
     values = _bounded_list(spec[key], f'{where}.{key}', MAX_SITES)
-    bound = MAX_ANGLE if key == 'angles' else math.degrees(MAX_ANGLE)
-    angles = [_number(v, f'{where}.{key}[{i}]', bound=bound) for i, v in enumerate(values)]
+    bound = limits.ANGLE if key == 'angles' else limits.ANGLE_DEG
+    angles = [_number(v, f'{where}.{key}[{i}]', bound) for i, v in enumerate(values)]
     if key == 'angles_deg':
         angles = [radians(a) for a in angles]
     wrapped = sorted(math.remainder(a, 2.0 * math.pi) % (2.0 * math.pi) for a in angles)
     gaps = [b - a for a, b in zip(wrapped, wrapped[1:] + [wrapped[0] + 2.0 * math.pi])]
     if len(angles) > 1 and min(gaps) < 1e-9:
         raise LayoutError(f'{where}.{key}: two sites at the same angle')
-    radius = _number(_required(spec, 'radius', where), f'{where}.radius', minimum=0.0,
-                     strict=True)
+    radius = _number(_required(spec, 'radius', where), f'{where}.radius',
+                     limits.DIVISOR_RADIUS)
     masses = _bounded_list(_required(spec, 'masses', where), f'{where}.masses',
                            MAX_WEIGHT_SIZES)
-    masses = sorted(_number(v, f'{where}.masses[{i}]', minimum=0.0, strict=True)
+    masses = sorted(_number(v, f'{where}.masses[{i}]', limits.WEIGHT_MASS)
                     for i, v in enumerate(masses))
     if len(set(masses)) != len(masses):
         raise LayoutError(f'{where}.masses: each weight size once')
@@ -683,27 +720,23 @@ def _text(value, where, allow_empty=False, limit=None):
     return value
 
 
-def _number(value, where, minimum=None, strict=False, bound=MAX_MAGNITUDE):
+def _number(value, where, limit=limits.POSITION):
+    """Return ``value`` as a float within ``limit`` (a :class:`limits.Limit`), or refuse it."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise LayoutError(f'{where} must be a number, got {short(value)}')
-    if isinstance(value, int) and abs(value) > bound:     # before float(): 10^400 overflows
-        raise LayoutError(f'{where} must be within +-{bound:g}, got {short(value)}')
+    if isinstance(value, int) and not limit.low <= value <= limit.high:
+        # before float(): 10^400 overflows
+        raise LayoutError(limit.message(where, short(value)))
     value = float(value)
     if not math.isfinite(value):
         raise LayoutError(f'{where} must be finite, got {value}')
-    if abs(value) > bound:
-        raise LayoutError(f'{where} must be within +-{bound:g}, got {value:g}')
-    if minimum is not None and (value < minimum or (strict and value == minimum)):
-        sign = '>' if strict else '>='
-        raise LayoutError(f'{where} must be {sign} {minimum:g}, got {value:g}')
-    return value
+    return limits.check(value, limit, where, LayoutError)
 
 
-def _vector(value, length, where, minimum=None):
+def _vector(value, length, where, limit):
     if not isinstance(value, list) or len(value) != length:
         raise LayoutError(f'{where} must be a list of {length} numbers, got {short(value)}')
-    strict = minimum is not None
-    return tuple(_number(v, f'{where}[{i}]', minimum, strict) for i, v in enumerate(value))
+    return tuple(_number(v, f'{where}[{i}]', limit) for i, v in enumerate(value))
 
 
 def _unique(names, what):

@@ -8,76 +8,30 @@ last). Whatever goes wrong, the caller gets one :class:`LayoutError` naming it, 
 another exception type.
 """
 
+from array import array
 from contextlib import contextmanager
 import gc
-import json
 import math
 from operator import attrgetter
+import os
 from typing import Any
 
 import msgspec
 import numpy as np
-import yaml
 
+from cvc_balance.physics import documents
 from cvc_balance.physics.component_table import ComponentTable
-from cvc_balance.physics.layout import (body_component, Layout, layout_with_components,
-                                        LayoutError, parse_layout, plain_columns, short)
+from cvc_balance.physics.documents import DocumentError
+from cvc_balance.physics.layout import (body_component, check_count, check_head, component,
+                                        layout_with_components, LayoutError, MAX_COMPONENTS,
+                                        MAX_NAME, parse_layout, plain_columns, plain_rows,
+                                        unique_names)
 
 MAX_TEXT_BYTES = 256 * 2**20
 """Largest layout text, bytes (10^6 components as JSON take about 90 MB)."""
-ALIAS_EXPANSION = 4
-"""YAML aliases may at most multiply a document's nodes by this (plus ALIAS_ALLOWANCE)."""
-ALIAS_ALLOWANCE = 10_000
-
-try:    # libyaml's parser (C, events): fast, and it keeps its own stack, so it is safe
-    from yaml._yaml import CParser as _Parser
-except ImportError:                                  # pragma: no cover
-    from yaml.parser import Parser as _Parser
-
-    class _Stream(yaml.reader.Reader, yaml.scanner.Scanner, _Parser):
-        pass
-    _Parser = _Stream
-
-
-class _LayoutLoader(yaml.composer.Composer, _Parser, yaml.constructor.SafeConstructor,
-                    yaml.resolver.Resolver):
-    """
-    PyYAML's safe loading, with Python's composer, that refuses duplicate keys.
-
-    The composer is PyYAML's Python one even over libyaml's parser: libyaml's own
-    (Cython) composer recurses in C per level of nesting, so 10^5 nested lists crash the
-    process; the Python one raises RecursionError, which becomes a LayoutError.
-    """
-
-    def __init__(self, stream):
-        """Read ``stream`` (text)."""
-        _Parser.__init__(self, stream)
-        yaml.constructor.SafeConstructor.__init__(self)
-        yaml.resolver.Resolver.__init__(self)
-        yaml.composer.Composer.__init__(self)
-
-    def construct_mapping(self, node, deep=False):
-        """Construct a mapping; a key given twice is an error (YAML says keys are unique)."""
-        if isinstance(node, yaml.MappingNode):
-            seen = set()
-            for key_node, _ in node.value:
-                if key_node.tag == 'tag:yaml.org,2002:merge':
-                    continue
-                key = self.construct_object(key_node, deep=True)
-                try:
-                    duplicate = key in seen
-                except TypeError:
-                    raise LayoutError(f'line {key_node.start_mark.line + 1}: a key must be a '
-                                      f'number or text, got {short(key)}') from None
-                if duplicate:
-                    raise LayoutError(f'line {key_node.start_mark.line + 1}: key {short(key)} '
-                                      'given twice')
-                seen.add(key)
-        return super().construct_mapping(node, deep)
-
-
-_LayoutLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
-                              _LayoutLoader.construct_mapping)
+MAX_YAML_BYTES = 64 * 2**20
+"""Largest YAML layout, bytes (about 600 000 components): YAML is read event by event,
+about 20 times slower than JSON's columns; bigger layouts are to be written as JSON."""
 
 
 def layout_from_text(text, source='layout'):
@@ -85,7 +39,8 @@ def layout_from_text(text, source='layout'):
     Parse YAML or JSON text into a validated Layout.
 
     JSON (which YAML mostly contains) is tried first so that JSON's NaN and
-    Infinity are read as numbers and then rejected by the validation.
+    Infinity are read as numbers and then rejected by the validation. YAML 1.2
+    (:mod:`~cvc_balance.physics.documents`), its components collected as columns.
     Raises :class:`LayoutError` with one line naming the problem, whatever it is.
     """
     if isinstance(text, (bytes, bytearray)):
@@ -95,18 +50,66 @@ def layout_from_text(text, source='layout'):
             raise LayoutError(f'{source}: layout is not UTF-8 text') from None
     if not isinstance(text, str):
         raise LayoutError(f'{source}: layout must be text, got {type(text).__name__}')
-    if len(text) > MAX_TEXT_BYTES:
-        raise LayoutError(f'{source}: layout text of {len(text)} bytes is over the limit of '
+    _check_size(len(text), documents.looks_like_json(text[:64]), source)
+    with _one_line(source):
+        layout = _read_columns(text)
+        return layout if layout is not None else _layout_of(
+            documents.load_document(text, collect=_COLLECT))
+
+
+def load_layout(path):
+    """
+    Read and validate the layout file at ``path`` (a regular file: never a FIFO or device).
+
+    JSON is read whole (as columns when plainly well); YAML as a stream, its components
+    collected as columns, so the text is never held whole. Raises :class:`LayoutError`.
+    """
+    source = str(path)
+    try:
+        stream = documents.open_regular(path)
+    except OSError as error:
+        raise LayoutError(f'{path}: cannot read layout file: {error.strerror}') from None
+    except DocumentError as error:
+        raise LayoutError(str(error)) from None
+    with stream, _one_line(source):
+        size = os.fstat(stream.fileno()).st_size
+        start = stream.read(64)
+        is_json = documents.looks_like_json(start)
+        _check_size(size, is_json, source)
+        if is_json:
+            data = start + stream.read(MAX_TEXT_BYTES + 1 - len(start))
+            try:
+                text = data.decode('utf-8')
+            except UnicodeDecodeError:
+                raise LayoutError(f'{path}: layout file is not UTF-8 text') from None
+            del data
+            return layout_from_text(text, source)
+        return _layout_of(documents.load_stream(stream, start, MAX_YAML_BYTES,
+                                                collect=_COLLECT))
+
+
+def _check_size(size, is_json, source):
+    """Refuse a layout text of ``size`` bytes over its limit (YAML's is lower: use JSON)."""
+    if size > MAX_TEXT_BYTES:
+        raise LayoutError(f'{source}: layout text of {size} bytes is over the limit of '
                           f'{MAX_TEXT_BYTES} bytes')
+    if not is_json and size > MAX_YAML_BYTES:
+        raise LayoutError(f'{source}: a YAML layout of {size} bytes is over the limit of '
+                          f'{MAX_YAML_BYTES} bytes for YAML: write it as JSON (read as '
+                          'columns, 10^6 components in about 3 s)')
+
+
+@contextmanager
+def _one_line(source):
+    """Turn whatever reading a layout raises into one LayoutError that starts with ``source``."""
     try:
         with collector_paused():
-            parsed = _parse(text, source)
-            return parsed if isinstance(parsed, Layout) else parse_layout(parsed)
-    except LayoutError as error:
+            yield
+    except (LayoutError, DocumentError) as error:
         message = str(error)
         raise LayoutError(message if message.startswith(source) else f'{source}: {message}') \
             from None
-    except RecursionError:      # the JSON and YAML parsers recurse per level of nesting
+    except RecursionError:      # the JSON parser recurses per level of nesting
         raise LayoutError(f'{source}: nested too deeply (a layout needs 5 levels)') from None
     except MemoryError:
         raise LayoutError(f'{source}: layout too large for memory') from None
@@ -131,37 +134,101 @@ def collector_paused():
             gc.enable()
 
 
-def _parse(text, source):
-    layout = _read_columns(text)
-    if layout is not None:
-        return layout
+def _layout_of(value):
+    """Validate a parsed layout document (components as columns or a list) into a Layout."""
+    components = check_head(value)
+    if not isinstance(components, _ComponentColumns):
+        return parse_layout(value)
+    table = components.table()
+    return layout_with_components(value, table)
+
+
+_PLAIN_FIELDS = frozenset(('name', 'mass', 'radius', 'angle', 'z'))
+
+
+class _ComponentColumns:
+    """
+    A YAML layout's components, collected item by item as columns (names, four arrays).
+
+    A point mass plainly written (fields name, mass, radius, angle and z, of the right
+    types) costs a name and four floats; any other item (a shape, angle_deg, a wrong
+    value) is kept whole and validated at the end as :func:`parse_layout` would, which
+    names what is wrong.
+    """
+
+    def __init__(self):
+        """Start with no components."""
+        self.names = []
+        self.columns = tuple(array('d') for _ in range(4))      # mass, radius, angle, z
+        self.items = {}                                         # index: item kept whole
+
+    def add(self, item, line):
+        """Take the next component (a parsed item) at ``line`` of the text."""
+        index = len(self.names)
+        if index >= MAX_COMPONENTS:
+            raise LayoutError(f'layout: field components: more than {MAX_COMPONENTS} '
+                              'components, over the limit')
+        row = _plain_row(item)
+        if row is None:
+            self.items[index] = item
+            row = (None, math.nan, math.nan, math.nan, math.nan)
+        self.names.append(row[0])
+        for column, value in zip(self.columns, row[1:]):
+            column.append(value)
+
+    def finish(self):
+        """Return itself: the list's value in the document."""
+        return self
+
+    def table(self):
+        """
+        Return the components as a ComponentTable, validated; raises :class:`LayoutError`.
+
+        The first wrong component (in order) is named as :func:`parse_layout` names it.
+        """
+        names = self.names
+        check_count(len(names))
+        mass, radius, angle, z = (np.frombuffer(c, dtype=float) if len(c) else
+                                  np.zeros(0) for c in self.columns)
+        # Items kept whole, and rows out of range, in order: the first wrong one raises.
+        wrong = np.flatnonzero(~plain_rows(mass, radius, angle, z)).tolist()
+        suspects = set(self.items) | set(wrong)
+        bodies = {}
+        if suspects:
+            mass, radius, angle, z = (np.array(c) for c in (mass, radius, angle, z))
+        for k in sorted(suspects):
+            item = self.items.get(k)
+            if item is None:                  # a row: its mapping again, for the message
+                item = {'name': names[k], 'mass': float(mass[k]), 'radius': float(radius[k]),
+                        'angle': float(angle[k]), 'z': float(z[k])}
+            parsed = component(item, k)
+            names[k] = parsed.name
+            mass[k], radius[k], angle[k], z[k] = parsed.mass, parsed.radius, parsed.angle, \
+                parsed.z
+            if parsed.shape is not None or parsed.inertia is not None:
+                bodies[k] = parsed
+        unique_names(names)
+        return ComponentTable(names, (mass, radius, angle, z), bodies)
+
+
+def _plain_row(item):
+    """Return (name, mass, radius, angle, z) of a plainly written point mass, else None."""
+    if type(item) is not dict or not item.keys() <= _PLAIN_FIELDS or len(item) < 4:
+        return None
+    name, mass, radius, angle = (item.get('name'), item.get('mass'), item.get('radius'),
+                                 item.get('angle'))
+    z = item.get('z', 0.0)
+    if not (type(name) is str and 0 < len(name) <= MAX_NAME and name.isprintable()
+            and type(mass) in _NUMBERS and type(radius) in _NUMBERS
+            and type(angle) in _NUMBERS and type(z) in _NUMBERS):
+        return None
     try:
-        return json.loads(text, object_pairs_hook=_json_object)
-    except json.JSONDecodeError:
-        pass                    # not JSON: YAML then
-    loader = _LayoutLoader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            return None
-        _check_aliases(node, source)
-        return loader.construct_document(node)
-    except yaml.YAMLError as error:
-        mark = getattr(error, 'problem_mark', None)
-        # libyaml marks a problem found at the end of the text on the line after the last.
-        last_line = max(1, len(text.splitlines()))
-        where = f' line {min(mark.line + 1, last_line)}' if mark is not None else ''
-        problem = getattr(error, 'problem', None) or str(error).splitlines()[0]
-        raise LayoutError(f'{source}:{where}: not valid YAML or JSON: {short(problem, 80)}') \
-            from None
-    except LayoutError:
-        raise                   # said already (aliases), not wrapped below as a ValueError
-    except (ValueError, TypeError, IndexError, OverflowError) as error:
-        # PyYAML's constructors fail like this on e.g. `!!int ` or `!!float heavy`.
-        raise LayoutError(f'{source}: not valid YAML: {type(error).__name__}: '
-                          f'{short(str(error), 80)}') from None
-    finally:
-        loader.dispose()
+        return name, float(mass), float(radius), float(angle), float(z)
+    except OverflowError:                 # an integer of hundreds of digits
+        return None
+
+
+_COLLECT = {'components': _ComponentColumns}
 
 
 class _ComponentDoc(msgspec.Struct, forbid_unknown_fields=True, gc=False):
@@ -273,62 +340,3 @@ def _colons(value):
 
 
 _NUMBERS = (int, float)
-
-
-def _json_object(pairs):
-    mapping = dict(pairs)
-    if len(mapping) < len(pairs):       # a key given twice: say which
-        seen = set()
-        for key, _ in pairs:
-            if key in seen:
-                raise LayoutError(f'key {short(key)} given twice')
-            seen.add(key)
-    return mapping
-
-
-def _check_aliases(root, source):
-    """Refuse a YAML document whose aliases expand it beyond ALIAS_EXPANSION times."""
-    literal, stack, sizes, seen = 0, [(root, False)], {}, set()
-    while stack:           # iterative post-order: sizes of shared (aliased) nodes once
-        node, children_done = stack.pop()
-        key = id(node)
-        if children_done:
-            children = _children(node)
-            if any(id(child) not in sizes for child in children):
-                # A child begun but not finished is an ancestor: the node holds itself.
-                raise LayoutError(f'{source}: a YAML alias refers to a node that holds it '
-                                  '(a recursive structure): refused')
-            sizes[key] = 1 + sum(sizes[id(child)] for child in children)
-            continue
-        if key in seen:
-            continue
-        seen.add(key)
-        literal += 1
-        stack.append((node, True))
-        stack.extend((child, False) for child in _children(node) if id(child) not in seen)
-    expanded = sizes[id(root)]
-    if expanded > ALIAS_EXPANSION * literal + ALIAS_ALLOWANCE:
-        raise LayoutError(f'{source}: YAML aliases expand {literal} nodes to {expanded}: '
-                          f'refused (at most {ALIAS_EXPANSION}x)')
-
-
-def _children(node):
-    if isinstance(node, yaml.MappingNode):
-        return [part for pair in node.value for part in pair]
-    if isinstance(node, yaml.SequenceNode):
-        return list(node.value)
-    return []
-
-
-def load_layout(path):
-    """Read and validate the layout file at ``path``."""
-    try:
-        with open(path, 'rb') as stream:
-            data = stream.read(MAX_TEXT_BYTES + 1)
-    except OSError as error:
-        raise LayoutError(f'{path}: cannot read layout file: {error.strerror}') from None
-    try:
-        text = data.decode('utf-8')
-    except UnicodeDecodeError:
-        raise LayoutError(f'{path}: layout file is not UTF-8 text') from None
-    return layout_from_text(text, source=str(path))
