@@ -672,7 +672,7 @@ def _plane_sites(spec, plane):
             raise LayoutError(f'{where}.numbering must be one of {", ".join(NUMBERINGS)}, got '
                               f'{short(numbering)}')
         first = radians(_number(spec['first_hole_angle_deg'], f'{where}.first_hole_angle_deg',
-                                bound=math.degrees(MAX_ANGLE)))
+                                limits.ANGLE_DEG))
         first_hole = next((a for a in angles if abs(math.remainder(a - first, 2.0 * math.pi))
                            < 1e-9), None)
         if first_hole is None:
