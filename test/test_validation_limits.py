@@ -603,3 +603,17 @@ def test_at_the_limits_a_layout_is_refused_beyond_and_finite_everywhere_within(
     for warning in layout_warnings(layout):
         words = warning.replace(',', ' ').replace('(', ' ').split()
         assert 'inf' not in words and 'nan' not in words, warning
+
+
+def test_the_nodes_balance_grade_is_0_or_a_grade(tmp_path):
+    """balance_grade:=1e-300 would divide to inf fractions: one line naming it, exit 2."""
+    import subprocess
+    import sys
+    from ros_harness import ros_environment
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.ros.balance_monitor', '--ros-args',
+                          '-p', 'balance_grade:=1e-300'], env=ros_environment(),
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2
+    (line,) = [x for x in run.stderr.splitlines() if x.strip()]
+    assert line == ('balance_monitor: error: parameter balance_grade must be from 0.1 to 4000 '
+                    'mm/s (ISO 21940-11 grades run from G 0.4 to G 4000), got 1e-300 mm/s')

@@ -46,7 +46,7 @@ from cvc_balance.identify.mistakes import static_loads
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import (ENCAPSULATION_LE, joint_state_names, JointStateReader,
                                       string_message, WrenchStampedEncoder)
-from cvc_balance.physics import assessment
+from cvc_balance.physics import assessment, limits
 from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.frames import degrees_360, g_mm, g_mm2, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout import LayoutError, one_line
@@ -746,6 +746,9 @@ class BalanceMonitor(Node):
                 descriptor.floating_point_range = [
                     FloatingPointRange(from_value=bounds[0], to_value=bounds[1])]
             values[name] = self.declare_parameter(name, default, descriptor).value
+            if name == 'balance_grade' and values[name] != 0.0:
+                # 0: the layout's; else a grade as a layout's (a 1e-300 grade divides to inf).
+                limits.check(values[name], limits.GRADE, 'parameter balance_grade')
             if name in ('joint_name', 'stator_frame', 'rotor_frame') and \
                     not (isinstance(values[name], str) and values[name].strip()):
                 raise ValueError(f'parameter {name} must be a non-empty string, got '
