@@ -288,8 +288,8 @@ def keyphasor_motion(bag, topic=None, edge='rising', threshold=None,
     omega rad/s), so a tach can stand in for joint_states: at a sampled tach's sample
     times, or ``samples_per_rev`` evenly spaced in every revolution of a TimeReference
     keyphasor. Samples without an angle (before the first mark, after the last, inside an
-    irregular period) are left out and counted as rejected, with the marks' check in
-    ``reasons``.
+    irregular period) are left out and counted as rejected (``reasons``); the marks'
+    check goes to ``problems`` when it repaired, dropped or left out a mark.
     """
     tach = read_keyphasor(bag, topic, edge, threshold)
     marks = tach.marks
@@ -304,10 +304,10 @@ def keyphasor_motion(bag, topic=None, edge='rising', threshold=None,
         time_ns = tach.origin_ns + np.rint(seconds * 1e9).astype(np.int64)
     angle, omega, _ = marks.motion(tach.seconds(time_ns))
     ok = np.isfinite(angle) & np.isfinite(omega)
-    reasons = [tach.summary()] + tach.problems
     left_out = int((~ok).sum())
-    if left_out:
-        reasons.append(f'{left_out} keyphasor samples before the first mark, after the last '
-                       'or inside an irregular period: no angle there')
+    reasons = [f'{left_out} keyphasor samples before the first mark, after the last or '
+               'inside an irregular period: no angle there'] if left_out else []
+    problems = ([tach.summary()] if marks.missed or marks.doubled or marks.irregular
+                else []) + tach.problems
     return MotionSamples(time_ns[ok], time_ns[ok], wrap_angle(angle[ok]), omega[ok],
-                         left_out, reasons)
+                         left_out, reasons, problems=problems)

@@ -244,7 +244,7 @@ def _play(args):
     if args.output:         # recorded live, in place (a killed run keeps its chunks)
         check_new_output(args.output)
         check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
-    return play_main(args)
+    return play_main(args, input_topics(args))
 
 
 def _info(args):
