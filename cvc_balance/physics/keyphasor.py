@@ -224,18 +224,19 @@ class Marks:
         if len(self.time) < 2:
             nothing = np.full(len(k), np.nan)
             return nothing, nothing.copy(), nothing.copy()
+        # Per period: angle = 2 pi k + a1 s + a2 s^2 + a3 s^3 (s its share elapsed), the
+        # Hermite cubic's coefficients from the slopes a period: start, end (rad).
         speed = self.fitted_speed(span)
-        period = self.time[k + 1] - self.time[k]
-        start, end = speed[k] * period, speed[k + 1] * period     # rad a period
-        s2 = s * s
-        angle = TWO_PI * (k + 3.0 * s2 - 2.0 * s2 * s) + start * (s2 * s - 2.0 * s2 + s) \
-            + end * (s2 * s - s2)
-        omega = (TWO_PI * (6.0 * s - 6.0 * s2) + start * (3.0 * s2 - 4.0 * s + 1.0)
-                 + end * (3.0 * s2 - 2.0 * s)) / period
-        alpha = (TWO_PI * (6.0 - 12.0 * s) + start * (6.0 * s - 4.0)
-                 + end * (6.0 * s - 2.0)) / (period * period)
-        for values in (angle, omega, alpha):
-            values[~inside] = np.nan
+        period = np.diff(self.time)
+        start, end = speed[:-1] * period, speed[1:] * period
+        a1, a2, a3 = start, 3.0 * TWO_PI - 2.0 * start - end, start + end - 2.0 * TWO_PI
+        a1, a2, a3, rate = a1[k], a2[k], a3[k], 1.0 / period[k]
+        angle = TWO_PI * k + s * (a1 + s * (a2 + s * a3))
+        omega = (a1 + s * (2.0 * a2 + 3.0 * s * a3)) * rate
+        alpha = (2.0 * a2 + 6.0 * s * a3) * (rate * rate)
+        if not inside.all():        # before the first mark, after the last, irregular
+            for values in (angle, omega, alpha):
+                values[~inside] = np.nan
         return angle, omega, alpha
 
     def _period(self, time):
@@ -259,29 +260,27 @@ def slopes_at_zero(offsets, turns, valid):
 
     ``offsets`` (rows, points) s, ``turns`` (rows, points) rad, ``valid`` (rows, points)
     the points that count: two give the chord's slope, three or more the quadratic's
-    (a + b x + c x^2: b). NaN for a row of fewer than two.
+    (a + b x + c x^2: b, by Cramer's rule on the normal equations). NaN for a row of
+    fewer than two.
     """
     offsets, turns = np.asarray(offsets, float), np.asarray(turns, float)
-    weight = np.asarray(valid, bool).astype(float)
-    scale = np.max(np.abs(offsets) * weight, axis=1)
+    weight = np.asarray(valid, bool)
+    scale = np.max(np.abs(np.where(weight, offsets, 0.0)), axis=1)
     scale[~(scale > 0.0)] = 1.0
-    x = offsets / scale[:, None] * weight           # within [-1, 1]: well conditioned
-    y = turns * weight
-    count = weight.sum(axis=1)
-    sums = [count] + [np.sum(x ** p, axis=1) for p in range(1, 5)]
-    right = np.stack([y.sum(axis=1), (y * x).sum(axis=1), (y * x * x).sum(axis=1)], axis=1)
-    slope = np.full(len(count), np.nan)
-    quadratic = count >= 3
-    if quadratic.any():
-        normal = np.stack([np.stack(sums[i:i + 3], axis=1) for i in range(3)], axis=1)
-        slope[quadratic] = np.linalg.solve(normal[quadratic],
-                                           right[quadratic, :, None])[:, 1, 0]
-    chord = count == 2
-    if chord.any():
-        # Two points: the line through them (x's mean and variance from the sums).
-        mean_x, mean_y = sums[1][chord] / 2.0, right[chord, 0] / 2.0
-        slope[chord] = (right[chord, 1] / 2.0 - mean_x * mean_y) / \
-            (sums[2][chord] / 2.0 - mean_x * mean_x)
+    x = np.where(weight, offsets / scale[:, None], 0.0)      # within [-1, 1]
+    y = np.where(weight, turns, 0.0)
+    x2 = x * x
+    n, s1, s2 = weight.sum(axis=1).astype(float), x.sum(axis=1), x2.sum(axis=1)
+    s3, s4 = (x2 * x).sum(axis=1), (x2 * x2).sum(axis=1)
+    r0, r1, r2 = y.sum(axis=1), (y * x).sum(axis=1), (y * x2).sum(axis=1)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        # [[n s1 s2] [s1 s2 s3] [s2 s3 s4]] (a b c) = (r0 r1 r2): b by Cramer's rule.
+        det = n * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s2 * s3) + s2 * (s1 * s3 - s2 * s2)
+        det_b = n * (r1 * s4 - s3 * r2) - r0 * (s1 * s4 - s2 * s3) + s2 * (s1 * r2 - r1 * s2)
+        slope = det_b / det
+        # Two points: the line through them.
+        chord = (r1 / 2.0 - s1 * r0 / 4.0) / (s2 / 2.0 - s1 * s1 / 4.0)
+    slope = np.where(n == 2, chord, np.where(n >= 3, slope, np.nan))
     return slope / scale
 
 
