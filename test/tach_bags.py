@@ -154,3 +154,7 @@ def merge(path, *bags, change=None):
                             best_effort=topic != '/layout')
                     writer.write(made[topic], log_time, data)
     return path
+
+
+TYPES = {'float64': 'std_msgs/msg/Float64', 'time_reference': 'sensor_msgs/msg/TimeReference'}
+"""The tach's message type of each kind of write_run."""

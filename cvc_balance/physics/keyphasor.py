@@ -35,6 +35,7 @@ the acceleration is its slope. Everything is vectorised over samples.
 Times s, angles rad, speeds rad/s, accelerations rad/s^2.
 """
 
+from collections import deque
 from dataclasses import dataclass
 import math
 
@@ -54,6 +55,12 @@ SPAN_REVS = 8
 """Revolutions the speed at a mark is averaged over (centred)."""
 MIN_STRETCH_REVS = 8
 """Fewest whole revolutions of a steady stretch."""
+SAMPLES_PER_REV = 64
+"""Motion samples a revolution made from a tach of mark times (it has no samples)."""
+CHANGE = 0.01
+"""Revolutions a mark may lead (or lag) the live fit's prediction before the fit restarts."""
+SCATTER_GAIN = 0.1
+"""Weight of each new mark in the live marks' mean scatter on the fit."""
 TWO_PI = 2.0 * math.pi
 
 
@@ -204,8 +211,8 @@ class Marks:
         columns = np.arange(max(int(span), 1) + 1)
         rows = np.minimum(lo[:, None] + columns, n - 1)
         valid = columns <= width[:, None]
-        speed = slopes_at_zero(self.time[rows] - self.time[:, None],
-                               TWO_PI * (rows - index[:, None]), valid)
+        _, speed, _ = fit_at_zero(self.time[rows] - self.time[:, None],
+                                  TWO_PI * (rows - index[:, None]), valid)
         speed[width == 0] = np.nan
         return speed
 
@@ -224,16 +231,11 @@ class Marks:
         if len(self.time) < 2:
             nothing = np.full(len(k), np.nan)
             return nothing, nothing.copy(), nothing.copy()
-        # Per period: angle = 2 pi k + a1 s + a2 s^2 + a3 s^3 (s its share elapsed), the
-        # Hermite cubic's coefficients from the slopes a period: start, end (rad).
         speed = self.fitted_speed(span)
         period = np.diff(self.time)
-        start, end = speed[:-1] * period, speed[1:] * period
-        a1, a2, a3 = start, 3.0 * TWO_PI - 2.0 * start - end, start + end - 2.0 * TWO_PI
-        a1, a2, a3, rate = a1[k], a2[k], a3[k], 1.0 / period[k]
-        angle = TWO_PI * k + s * (a1 + s * (a2 + s * a3))
-        omega = (a1 + s * (2.0 * a2 + 3.0 * s * a3)) * rate
-        alpha = (2.0 * a2 + 6.0 * s * a3) * (rate * rate)
+        a1, a2, a3 = cubic(period, speed[:-1], speed[1:])
+        angle, omega, alpha = cubic_motion(s, (a1[k], a2[k], a3[k]), period[k])
+        angle += TWO_PI * k
         if not inside.all():        # before the first mark, after the last, irregular
             for values in (angle, omega, alpha):
                 values[~inside] = np.nan
@@ -254,14 +256,14 @@ class Marks:
         return k, share, inside
 
 
-def slopes_at_zero(offsets, turns, valid):
+def fit_at_zero(offsets, turns, valid):
     """
-    Return, per row, the slope at offset 0 of the least-squares quadratic through its points.
+    Return, per row, (value, slope, second derivative) at 0 of a least-squares quadratic.
 
     ``offsets`` (rows, points) s, ``turns`` (rows, points) rad, ``valid`` (rows, points)
-    the points that count: two give the chord's slope, three or more the quadratic's
-    (a + b x + c x^2: b, by Cramer's rule on the normal equations). NaN for a row of
-    fewer than two.
+    the points that count: two give the chord (its value, slope and 0), three or more the
+    quadratic's a + b x + c x^2 (a, b and 2 c, by Cramer's rule on the normal equations).
+    NaN for a row of fewer than two.
     """
     offsets, turns = np.asarray(offsets, float), np.asarray(turns, float)
     weight = np.asarray(valid, bool)
@@ -274,14 +276,48 @@ def slopes_at_zero(offsets, turns, valid):
     s3, s4 = (x2 * x).sum(axis=1), (x2 * x2).sum(axis=1)
     r0, r1, r2 = y.sum(axis=1), (y * x).sum(axis=1), (y * x2).sum(axis=1)
     with np.errstate(divide='ignore', invalid='ignore'):
-        # [[n s1 s2] [s1 s2 s3] [s2 s3 s4]] (a b c) = (r0 r1 r2): b by Cramer's rule.
+        # [[n s1 s2] [s1 s2 s3] [s2 s3 s4]] (a b c) = (r0 r1 r2), by Cramer's rule.
         det = n * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s2 * s3) + s2 * (s1 * s3 - s2 * s2)
-        det_b = n * (r1 * s4 - s3 * r2) - r0 * (s1 * s4 - s2 * s3) + s2 * (s1 * r2 - r1 * s2)
-        slope = det_b / det
-        # Two points: the line through them.
-        chord = (r1 / 2.0 - s1 * r0 / 4.0) / (s2 / 2.0 - s1 * s1 / 4.0)
-    slope = np.where(n == 2, chord, np.where(n >= 3, slope, np.nan))
-    return slope / scale
+        a = (r0 * (s2 * s4 - s3 * s3) - s1 * (r1 * s4 - s3 * r2)
+             + s2 * (r1 * s3 - s2 * r2)) / det
+        b = (n * (r1 * s4 - s3 * r2) - r0 * (s1 * s4 - s2 * s3)
+             + s2 * (s1 * r2 - r1 * s2)) / det
+        c = (n * (s2 * r2 - r1 * s3) - s1 * (s1 * r2 - r1 * s2)
+             + r0 * (s1 * s3 - s2 * s2)) / det
+        chord = (r1 / 2.0 - s1 * r0 / 4.0) / (s2 / 2.0 - s1 * s1 / 4.0)   # two points
+        through = (r0 - chord * s1) / 2.0
+    value = np.where(n == 2, through, np.where(n >= 3, a, np.nan))
+    slope = np.where(n == 2, chord, np.where(n >= 3, b, np.nan)) / scale
+    curvature = np.where(n == 2, 0.0, np.where(n >= 3, 2.0 * c, np.nan)) / (scale * scale)
+    return value, slope, curvature
+
+
+def cubic(period, start_speed, end_speed):
+    """
+    Return (a1, a2, a3): a period's angle 2 pi k + a1 s + a2 s^2 + a3 s^3, s in [0, 1].
+
+    The cubic that turns one revolution over ``period`` (s) with the speeds (rad/s) at
+    its two marks as its slopes (Hermite): exact at a constant acceleration. Arrays or
+    floats.
+    """
+    start, end = start_speed * period, end_speed * period      # rad a period
+    return start, 3.0 * TWO_PI - 2.0 * start - end, start + end - 2.0 * TWO_PI
+
+
+def cubic_motion(share, coefficients, period):
+    """Return (angle since the period's mark rad, omega, alpha) of :func:`cubic` at ``share``."""
+    a1, a2, a3 = coefficients
+    rate = 1.0 / period
+    return (share * (a1 + share * (a2 + share * a3)),
+            (a1 + share * (2.0 * a2 + 3.0 * share * a3)) * rate,
+            (2.0 * a2 + 6.0 * share * a3) * (rate * rate))
+
+
+def marks_summary(topic, found, missed, doubled, irregular, revolutions):
+    """Return the one line that says what a tach's marks' check found (offline and live)."""
+    return (f'keyphasor {topic}: {found} marks, {missed} missed (put back), {doubled} doubled '
+            f'(dropped), {irregular} irregular periods (no angle there), {revolutions} '
+            'revolutions')
 
 
 def checked_marks(times, tolerance=PERIOD_TOLERANCE, neighbours=NEIGHBOURS):
@@ -419,3 +455,261 @@ def _longest_run(mask):
     starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     longest = int(np.argmax(stops - starts))
     return int(starts[longest]), int(stops[longest])
+
+
+LEVEL_FIRST = 256
+"""Samples a live tach signal's levels are first judged over."""
+LEVEL_WINDOW = 4096
+"""Samples (the latest) its levels are judged over again, every quarter of them."""
+
+
+class LiveSignal:
+    """
+    A sampled tach's marks as its samples come (the node's): :func:`signal_marks` looking back.
+
+    The same crossings (``edge``, ``threshold``, ``hysteresis``; a crossing counts once
+    the signal has been beyond the band on each side, timed between the last sample
+    below the threshold and the next): a sample can only end a crossing, never move one.
+    The levels are those of the first :data:`LEVEL_FIRST` samples, then of the latest
+    :data:`LEVEL_WINDOW`, judged again every quarter of that (no marks before).
+    """
+
+    def __init__(self, edge='rising', threshold=None, hysteresis=HYSTERESIS):
+        """Start with no samples; ``threshold`` None: midway between the signal's levels."""
+        if edge not in EDGES:
+            raise ValueError(f'keyphasor edge must be rising or falling, got {edge!r}')
+        if threshold is not None and not math.isfinite(threshold):
+            raise ValueError(f'keyphasor threshold must be finite, got {threshold}')
+        self.sign = 1.0 if edge == 'rising' else -1.0
+        self.given, self.hysteresis = threshold, hysteresis
+        self.levels = None              # (low, high) once judged
+        self.threshold = self.band = None
+        self._values = deque(maxlen=LEVEL_WINDOW)
+        self._until = LEVEL_FIRST       # samples until the levels are judged (again)
+        self._high = None               # the side of the last sample beyond the band
+        self._previous = None           # (time, signed distance) of the last sample
+        self._crossing = None           # time of the last crossing from below
+        self.spacing = 0.0              # s between the last two samples
+
+    def sample(self, time, value):
+        """
+        Take a sample: ``time`` s (increasing) and ``value``.
+
+        Return the time (s) of the mark it ends, or None.
+        """
+        if not (math.isfinite(time) and math.isfinite(value)):
+            return None
+        self._values.append(value)
+        self._until -= 1
+        if self._until <= 0:
+            self._judge_levels()
+        if self.threshold is None:
+            return None
+        above = self.sign * (value - self.threshold)
+        previous, self._previous = self._previous, (time, above)
+        if previous is not None:
+            self.spacing = time - previous[0]
+        if above < 0.0:
+            self._crossing = None
+        elif previous is not None and previous[1] < 0.0:
+            before, below = previous
+            self._crossing = before + (-below / (above - below)) * (time - before)
+        if above > self.band:
+            mark = self._crossing if self._high is False else None
+            self._high = True
+            return mark
+        if above < -self.band:
+            self._high = False
+        return None
+
+    def _judge_levels(self):
+        self._until = LEVEL_WINDOW // 4
+        try:
+            low, high = signal_levels(np.fromiter(self._values, float, len(self._values)))
+        except ValueError:          # flat so far: no marks yet
+            return
+        self.levels = (low, high)
+        self.threshold = 0.5 * (low + high) if self.given is None else self.given
+        self.band = self.hysteresis * (high - low)
+
+
+class LiveMarks:
+    """
+    A tach's marks checked as they come, looking back only (the node's).
+
+    A run of good marks gives, at its newest mark, the speed and acceleration of the
+    constant-acceleration fit to its last :data:`SPAN_REVS` revolutions
+    (:func:`fit_at_zero`), hence the time the next revolution should take (``period``:
+    on a ramp a median of the last periods would lag them by several). Each period is
+    judged against it (:data:`PERIOD_TOLERANCE`): about one revolution is good; about
+    n = 2 or 3 lost n - 1 marks (put back evenly: ``missed``); a short one is held until
+    the next mark, and when the two make one revolution the held mark was extra
+    (dropped: ``doubled``); anything else is ``irregular``: the marks start again, and
+    :data:`LEARN` periods each within the tolerance of the one before (learning, as at
+    the start) must come before an angle is given. Between marks the angle and speed are
+    extrapolated along the fit (:meth:`motion_at`). No mark for ``MAX_MISSED + 1``
+    periods and the tolerance: the marks start again. Times s (increasing), speeds rad/s.
+    """
+
+    LEARN = 3
+    """Periods that must agree before the first angle (and after an irregular period)."""
+
+    def __init__(self, tolerance=PERIOD_TOLERANCE, span=SPAN_REVS):
+        """Start with no marks."""
+        self.tolerance, self.span = tolerance, span
+        self.found = self.missed = self.doubled = self.irregular = self.revolutions = 0
+        self._run = deque(maxlen=span + 1)     # (time, speed, acceleration) of good marks
+        self._learning = []                    # marks while learning
+        self._held = None                      # a mark after a short period
+        self.period = None                     # s the next revolution should take
+        self._scatter = 0.0                    # mean |lead| of the marks on the fit, rev
+        self._leads = 0                        # leads the scatter is the mean of
+        self._offset = 0.0
+
+    @property
+    def ready(self):
+        """Tell whether an angle can be given (the period is learnt)."""
+        return self.period is not None
+
+    @property
+    def last(self):
+        """Return the time (s) of the newest good mark, or None."""
+        return self._run[-1][0] if self._run else None
+
+    def mark(self, time, resolution=0.0):
+        """
+        Take a mark at ``time`` (s); return the good periods it completes, in order.
+
+        Each as (start s, end s, speed at start, speed at end, rad/s). None for a mark not
+        after the previous one (left out, not counted). ``resolution``: s the mark may be
+        off by (a sampled tach's sample spacing: a 0/1 signal's crossing is timed to it).
+        """
+        newest = self._held if self._held is not None else (
+            self.last if self.ready else (self._learning[-1] if self._learning else None))
+        if newest is not None and not time > newest:
+            return None
+        self.found += 1
+        if not self.ready:
+            return self._learn(time)
+        elapsed = time - self.last
+        if self._held is not None:
+            held, self._held = self._held, None
+            if self._turns(elapsed) == 1:
+                self.doubled += 1
+                return self._take(time, resolution)
+            self.irregular += 1                 # the short period was a period after all
+            return self._restart(held, time)
+        turns = self._turns(elapsed)
+        if turns == 1:
+            return self._take(time, resolution)
+        if elapsed < (1.0 - self.tolerance) * self.period:
+            self._held = time
+            return []
+        if turns:
+            self.missed += turns - 1
+            start, done = self.last, []
+            for k in range(1, turns):
+                done += self._take(start + k * (elapsed / turns))     # as checked_marks
+            return done + self._take(time, resolution)
+        self.irregular += 1
+        return self._restart(time)
+
+    def motion_at(self, time):
+        """
+        Return (angle rad since the newest good mark, omega rad/s), or a reason there is none.
+
+        Extrapolated along the constant-acceleration fit at the newest mark; a reason (str)
+        while the period is being learnt, or when no mark came for longer than
+        ``MAX_MISSED + 1`` periods (then the marks start again).
+        """
+        if not self.ready:
+            return (f'keyphasor: learning the period ({len(self._learning)} marks of '
+                    f'{self.LEARN + 1})')
+        last, speed, acceleration = self._run[-1]
+        elapsed = time - last
+        if elapsed > (MAX_MISSED + 1 + self.tolerance) * self.period:
+            self.irregular += 1
+            self._restart()
+            return f'keyphasor: no mark for {elapsed:.3g} s (the rotor stopped?)'
+        return (self._offset + speed * elapsed + 0.5 * acceleration * elapsed * elapsed,
+                speed + acceleration * elapsed)
+
+    def _turns(self, elapsed):
+        """Return the revolutions (1 to MAX_MISSED + 1) ``elapsed`` s make, or 0: none."""
+        _, speed, acceleration = self._run[-1]
+        for turns in range(1, MAX_MISSED + 2):
+            expected = _turn_time(speed, acceleration, turns, self.period * turns)
+            if abs(elapsed / expected - 1.0) <= self.tolerance:
+                return turns
+        return 0
+
+    def _learn(self, time):
+        """Take a mark while learning; once LEARN periods agree, they are the first good ones."""
+        marks = self._learning
+        marks.append(time)
+        if len(marks) < self.LEARN + 1:
+            return []
+        periods = np.diff(marks)
+        if np.any(np.abs(periods[1:] / periods[:-1] - 1.0) > self.tolerance):
+            del marks[0]
+            self.irregular += 1
+            return []
+        self._learning = []
+        done = []
+        for mark in marks:
+            done += self._take(mark)
+        return done
+
+    def _take(self, time, resolution=0.0):
+        """Add a good mark; return the good period it ends (none for a run's first)."""
+        run = self._run
+        previous = run[-1] if run else None
+        if previous is not None and len(run) > 3 and self.period is not None:
+            # The mark's lead on the fit's prediction (revolutions): a change of
+            # acceleration shows as one beyond the marks' own scatter; the fit then
+            # forgets the revolutions before it (the speed follows within a few).
+            lead = (time - previous[0]) / self.period - 1.0
+            limit = max(CHANGE, 4.0 * self._scatter, 2.0 * resolution / self.period)
+            if self._leads >= self.LEARN and abs(lead) > limit:
+                for _ in range(len(run) - 2):
+                    run.popleft()
+            self._leads += 1
+            self._scatter += max(SCATTER_GAIN, 1.0 / self._leads) * (abs(lead) - self._scatter)
+        run.append((time, math.nan, 0.0))
+        if previous is None:
+            return []
+        times = np.fromiter((r[0] for r in run), float, len(run))
+        turns = TWO_PI * (np.arange(len(times)) - (len(times) - 1))
+        value, speed, acceleration = fit_at_zero((times - time)[None, :], turns[None, :],
+                                                 np.ones((1, len(times)), bool))
+        speed, acceleration = float(speed[0]), float(acceleration[0])
+        run[-1] = (time, speed, acceleration)
+        self._offset = float(value[0])
+        if len(run) == 2:               # the run's first mark: its period's speed
+            run[0] = (previous[0], speed, 0.0)
+        self.period = _turn_time(speed, acceleration, 1, time - previous[0])
+        self.revolutions += 1
+        return [(previous[0], time, run[-2][1], speed)]
+
+    def _restart(self, *marks):
+        """Start again from ``marks`` (learning): nothing before them is trusted."""
+        self._run.clear()
+        self._held = None
+        self.period = None
+        self._learning = list(marks)
+        return []
+
+
+def _turn_time(speed, acceleration, turns, otherwise):
+    """
+    Return the time (s) ``turns`` revolutions take from a mark at ``speed`` and ``acceleration``.
+
+    The root of speed t + acceleration t^2 / 2 = 2 pi turns (in its stable form);
+    ``otherwise`` when there is none (the rotor would stop first) or the speed is not
+    forward.
+    """
+    angle = TWO_PI * turns
+    root = speed * speed + 2.0 * acceleration * angle
+    if not (speed > 0.0 and root > 0.0):
+        return otherwise
+    return 2.0 * angle / (speed + math.sqrt(root))

@@ -28,6 +28,7 @@ from cvc_balance.bag.inputs import input_channels
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import read_string_message
+from cvc_balance.physics.keyphasor import marks_summary
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
 from cvc_balance.ros.recorder import message_class
 
@@ -265,4 +266,9 @@ def format_verdicts(verdicts):
         if values.get('verdict source') == 'measured':     # the layout's, beside it
             lines.append(f"      the layout expects {values.get('layout verdict level', '?')}: "
                          f"{values.get('layout verdict', '')}")
+        if 'keyphasor marks' in values:             # the node's check of the tach's marks
+            lines.append('      ' + marks_summary(
+                values['keyphasor'].split(' ')[0], values['keyphasor marks'],
+                values['keyphasor missed (put back)'], values['keyphasor doubled (dropped)'],
+                values['keyphasor irregular periods'], values['keyphasor revolutions']))
     return '\n'.join(lines)
