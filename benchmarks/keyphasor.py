@@ -14,7 +14,14 @@ Each is the wall-clock time from opening the bag to the MotionSamples, best of
 ``--repeat`` runs, printed per sample side by side, with the tach path's share of it:
 reading the Float64 values, the marks, their check, and the motion.
 
-Run: ./dev.sh run python benchmarks/keyphasor.py [--samples 1000000] [--repeat 5]
+Live (``--live N`` samples, default 20000): the node (bundled CT gantry layout, its
+publishers matched by nothing) in this process, each path's callback called N times in
+a row, best of ``--repeat``: a JointState's CDR bytes (``_on_joint_states``: read, stamp
+gate, engine, five outputs published) against a sampled tach's (the Float64 read, the
+node's clock read as ``_on_float64`` does, the crossing, the marks' check, the
+extrapolation, then the same). Both accept every sample (said).
+
+Run: ./dev.sh run python benchmarks/keyphasor.py [--samples 1000000] [--repeat 5] [--live N]
 """
 
 import argparse
@@ -70,11 +77,63 @@ def best(repeat, work):
     return min(times)
 
 
+def live_paths(samples, repeat):
+    """Return {path: (best s per sample, samples accepted)} of the node's two callbacks."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64
+
+    from cvc_balance.ros.balance_monitor import BalanceMonitor
+
+    layout = Path(__file__).resolve().parents[1] / 'config' / 'ct_gantry.yaml'
+    rclpy.init()
+    node = BalanceMonitor(parameter_overrides=[
+        Parameter('layout_file', value=str(layout)), Parameter('keyphasor_topic', value='tach'),
+        Parameter('max_stamp_jump', value=1e6)])
+    node._keyphasor.subscribe('std_msgs/msg/Float64')
+    t = np.arange(samples * repeat) / RATE
+    angle = SPEED * t
+    joints, tach = [], []
+    for k, (q, seconds) in enumerate(zip(angle, t)):
+        msg = JointState(name=['gantry_joint'], position=[float(wrap_angle(q))],
+                         velocity=[SPEED])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000 + int(seconds), \
+            int(round((seconds % 1.0) * 1e9))
+        joints.append(serialize_message(msg))
+        tach.append(serialize_message(Float64(data=float(np.mod(q, 2 * np.pi) < 1.0))))
+    later = 1_700_000_000 + int(t[-1]) + 10         # s: after every JointState stamp
+    stamps = (later * 10 ** 9 + np.rint(t * 1e9).astype(np.int64)).tolist()
+    clock, keyphasor, out = node.get_clock(), node._keyphasor, {}
+    try:
+        for name in ('encoder', 'tach'):
+            times, before = [], node._counts['accepted']
+            for run in range(repeat):
+                block = slice(run * samples, (run + 1) * samples)
+                started = time.perf_counter()
+                if name == 'encoder':
+                    for data in joints[block]:
+                        node._on_joint_states(data)
+                else:
+                    for data, stamp in zip(tach[block], stamps[block]):
+                        clock.now()             # what _on_float64 reads (its stamp)
+                        keyphasor.float64(data, stamp, started)
+                times.append(time.perf_counter() - started)
+            out[name] = (min(times) / samples, node._counts['accepted'] - before)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return out
+
+
 def main():
     """Time both paths and print them side by side."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--samples', type=int, default=1_000_000)
     parser.add_argument('--repeat', type=int, default=5)
+    parser.add_argument('--live', type=int, default=20000, metavar='N',
+                        help='motion samples per live run (0: offline only)')
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         encoder, tach = make_bags(args.samples, Path(folder))
@@ -108,6 +167,15 @@ def main():
           f'({tach_s / encoder_s - 1.0:+.0%} against the encoder; target within +20 %)')
     for name, seconds in parts.items():
         print(f'    {name:20} {seconds * 1e9 / n:7.1f} ns/sample')
+    if args.live:
+        live = live_paths(args.live, args.repeat)
+        (encoder_live, encoder_n), (tach_live, tach_n) = live['encoder'], live['tach']
+        print(f'live, the node\'s callback, {args.live} samples a run, best of {args.repeat}:')
+        print(f'  encoder (JointState CDR -> outputs):    {encoder_live * 1e6:7.2f} us/sample '
+              f'({encoder_n} accepted)')
+        print(f'  tach    (Float64 CDR -> outputs):       {tach_live * 1e6:7.2f} us/sample '
+              f'({tach_n} accepted; {tach_live / encoder_live - 1.0:+.0%} against the encoder; '
+              'target within +20 %)')
 
 
 if __name__ == '__main__':

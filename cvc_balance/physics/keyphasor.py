@@ -227,33 +227,28 @@ class Marks:
         derivatives, so the three agree. NaN before the first mark, after the last and
         inside irregular periods.
         """
-        k, s, inside = self._period(time)
-        if len(self.time) < 2:
-            nothing = np.full(len(k), np.nan)
-            return nothing, nothing.copy(), nothing.copy()
-        speed = self.fitted_speed(span)
-        period = np.diff(self.time)
-        a1, a2, a3 = cubic(period, speed[:-1], speed[1:])
-        angle, omega, alpha = cubic_motion(s, (a1[k], a2[k], a3[k]), period[k])
-        angle += TWO_PI * k
-        if not inside.all():        # before the first mark, after the last, irregular
-            for values in (angle, omega, alpha):
-                values[~inside] = np.nan
-        return angle, omega, alpha
-
-    def _period(self, time):
-        """Return (period index, share of it elapsed, whether inside a good period)."""
         time = np.atleast_1d(np.asarray(time, float))
         n = len(self.time)
         if n < 2:
-            return (np.zeros(len(time), np.int64), np.zeros(len(time)),
-                    np.zeros(len(time), bool))
+            nothing = np.full(len(time), np.nan)
+            return nothing, nothing.copy(), nothing.copy()
+        speed = self.fitted_speed(span)
+        period = np.diff(self.time)
+        # Per period, one row each: its mark, 1 / its length (NaN in an irregular one: no
+        # angle there), the cubic, 2 pi k; gathered for every sample at once.
+        rate = np.where(self.good, 1.0 / period, np.nan)
+        table = np.stack([self.time[:-1], rate, *cubic(period, speed[:-1], speed[1:]),
+                          TWO_PI * np.arange(n - 1)])
         k = np.clip(np.searchsorted(self.time, time, side='right') - 1, 0, n - 2)
-        start, end = self.time[k], self.time[k + 1]
-        inside = (time >= self.time[0]) & (time <= self.time[-1]) & self.good[k]
-        with np.errstate(divide='ignore', invalid='ignore'):
-            share = (time - start) / (end - start)
-        return k, share, inside
+        mark, rate, a1, a2, a3, turns = table[:, k]
+        share = (time - mark) * rate
+        angle, omega, alpha = cubic_motion(share, (a1, a2, a3), rate)
+        angle += turns
+        outside = (time < self.time[0]) | (time > self.time[-1])
+        if outside.any():           # before the first mark, after the last
+            for values in (angle, omega, alpha):
+                values[outside] = np.nan
+        return angle, omega, alpha
 
 
 def fit_at_zero(offsets, turns, valid):
@@ -276,20 +271,32 @@ def fit_at_zero(offsets, turns, valid):
     s3, s4 = (x2 * x).sum(axis=1), (x2 * x2).sum(axis=1)
     r0, r1, r2 = y.sum(axis=1), (y * x).sum(axis=1), (y * x2).sum(axis=1)
     with np.errstate(divide='ignore', invalid='ignore'):
-        # [[n s1 s2] [s1 s2 s3] [s2 s3 s4]] (a b c) = (r0 r1 r2), by Cramer's rule.
-        det = n * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s2 * s3) + s2 * (s1 * s3 - s2 * s2)
-        a = (r0 * (s2 * s4 - s3 * s3) - s1 * (r1 * s4 - s3 * r2)
-             + s2 * (r1 * s3 - s2 * r2)) / det
-        b = (n * (r1 * s4 - s3 * r2) - r0 * (s1 * s4 - s2 * s3)
-             + s2 * (s1 * r2 - r1 * s2)) / det
-        c = (n * (s2 * r2 - r1 * s3) - s1 * (s1 * r2 - r1 * s2)
-             + r0 * (s1 * s3 - s2 * s2)) / det
-        chord = (r1 / 2.0 - s1 * r0 / 4.0) / (s2 / 2.0 - s1 * s1 / 4.0)   # two points
-        through = (r0 - chord * s1) / 2.0
+        a, b, c = _normal_solution(n, s1, s2, s3, s4, r0, r1, r2)
+        through, chord = _chord(s1, s2, r0, r1)
     value = np.where(n == 2, through, np.where(n >= 3, a, np.nan))
     slope = np.where(n == 2, chord, np.where(n >= 3, b, np.nan)) / scale
     curvature = np.where(n == 2, 0.0, np.where(n >= 3, 2.0 * c, np.nan)) / (scale * scale)
     return value, slope, curvature
+
+
+def _normal_solution(n, s1, s2, s3, s4, r0, r1, r2):
+    """
+    Return (a, b, c) of the least-squares a + b x + c x^2 from its sums (arrays or floats).
+
+    n points, s_p the sums of x^p, r_p of y x^p: [[n s1 s2] [s1 s2 s3] [s2 s3 s4]]
+    (a b c) = (r0 r1 r2), by Cramer's rule.
+    """
+    det = n * (s2 * s4 - s3 * s3) - s1 * (s1 * s4 - s2 * s3) + s2 * (s1 * s3 - s2 * s2)
+    return ((r0 * (s2 * s4 - s3 * s3) - s1 * (r1 * s4 - s3 * r2)
+             + s2 * (r1 * s3 - s2 * r2)) / det,
+            (n * (r1 * s4 - s3 * r2) - r0 * (s1 * s4 - s2 * s3) + s2 * (s1 * r2 - r1 * s2)) / det,
+            (n * (s2 * r2 - r1 * s3) - s1 * (s1 * r2 - r1 * s2) + r0 * (s1 * s3 - s2 * s2)) / det)
+
+
+def _chord(s1, s2, r0, r1):
+    """Return (value at 0, slope) of the line through two points from their sums."""
+    slope = (r1 / 2.0 - s1 * r0 / 4.0) / (s2 / 2.0 - s1 * s1 / 4.0)
+    return (r0 - slope * s1) / 2.0, slope
 
 
 def cubic(period, start_speed, end_speed):
@@ -304,10 +311,13 @@ def cubic(period, start_speed, end_speed):
     return start, 3.0 * TWO_PI - 2.0 * start - end, start + end - 2.0 * TWO_PI
 
 
-def cubic_motion(share, coefficients, period):
-    """Return (angle since the period's mark rad, omega, alpha) of :func:`cubic` at ``share``."""
+def cubic_motion(share, coefficients, rate):
+    """
+    Return (angle since the period's mark rad, omega, alpha) of :func:`cubic` at ``share``.
+
+    ``rate``: 1 / the period's length (1/s).
+    """
     a1, a2, a3 = coefficients
-    rate = 1.0 / period
     return (share * (a1 + share * (a2 + share * a3)),
             (a1 + share * (2.0 * a2 + 3.0 * share * a3)) * rate,
             (2.0 * a2 + 6.0 * share * a3) * (rate * rate))
@@ -460,7 +470,7 @@ def _longest_run(mask):
 LEVEL_FIRST = 256
 """Samples a live tach signal's levels are first judged over."""
 LEVEL_WINDOW = 4096
-"""Samples (the latest) its levels are judged over again, every quarter of them."""
+"""Samples (the latest) its levels are judged over, at most every so many samples."""
 
 
 class LiveSignal:
@@ -470,8 +480,9 @@ class LiveSignal:
     The same crossings (``edge``, ``threshold``, ``hysteresis``; a crossing counts once
     the signal has been beyond the band on each side, timed between the last sample
     below the threshold and the next): a sample can only end a crossing, never move one.
-    The levels are those of the first :data:`LEVEL_FIRST` samples, then of the latest
-    :data:`LEVEL_WINDOW`, judged again every quarter of that (no marks before).
+    The levels are those of the first :data:`LEVEL_FIRST` samples (no marks before), judged
+    again each time the samples have doubled, then every :data:`LEVEL_WINDOW` samples over
+    the latest :data:`LEVEL_WINDOW`.
     """
 
     def __init__(self, edge='rising', threshold=None, hysteresis=HYSTERESIS):
@@ -486,6 +497,7 @@ class LiveSignal:
         self.threshold = self.band = None
         self._values = deque(maxlen=LEVEL_WINDOW)
         self._until = LEVEL_FIRST       # samples until the levels are judged (again)
+        self._seen = 0                  # samples taken
         self._high = None               # the side of the last sample beyond the band
         self._previous = None           # (time, signed distance) of the last sample
         self._crossing = None           # time of the last crossing from below
@@ -500,6 +512,7 @@ class LiveSignal:
         if not (math.isfinite(time) and math.isfinite(value)):
             return None
         self._values.append(value)
+        self._seen += 1
         self._until -= 1
         if self._until <= 0:
             self._judge_levels()
@@ -523,7 +536,7 @@ class LiveSignal:
         return None
 
     def _judge_levels(self):
-        self._until = LEVEL_WINDOW // 4
+        self._until = min(self._seen, LEVEL_WINDOW)     # after 256, 512, ... 4096, 4096 ...
         try:
             low, high = signal_levels(np.fromiter(self._values, float, len(self._values)))
         except ValueError:          # flat so far: no marks yet
@@ -678,13 +691,8 @@ class LiveMarks:
         run.append((time, math.nan, 0.0))
         if previous is None:
             return []
-        times = np.fromiter((r[0] for r in run), float, len(run))
-        turns = TWO_PI * (np.arange(len(times)) - (len(times) - 1))
-        value, speed, acceleration = fit_at_zero((times - time)[None, :], turns[None, :],
-                                                 np.ones((1, len(times)), bool))
-        speed, acceleration = float(speed[0]), float(acceleration[0])
+        self._offset, speed, acceleration = _fit_run([r[0] - time for r in run])
         run[-1] = (time, speed, acceleration)
-        self._offset = float(value[0])
         if len(run) == 2:               # the run's first mark: its period's speed
             run[0] = (previous[0], speed, 0.0)
         self.period = _turn_time(speed, acceleration, 1, time - previous[0])
@@ -698,6 +706,27 @@ class LiveMarks:
         self.period = None
         self._learning = list(marks)
         return []
+
+
+def _fit_run(offsets):
+    """
+    Return :func:`fit_at_zero` of one run of marks (plain floats: the node's, per mark).
+
+    ``offsets`` s of its marks from the newest (the last, 0), one revolution apart.
+    """
+    scale = max(-offsets[0], 1e-300)
+    last = len(offsets) - 1
+    n = s1 = s2 = s3 = s4 = r0 = r1 = r2 = 0.0
+    for k, offset in enumerate(offsets):
+        x, y = offset / scale, TWO_PI * (k - last)
+        x2 = x * x
+        n, s1, s2, s3, s4 = n + 1.0, s1 + x, s2 + x2, s3 + x2 * x, s4 + x2 * x2
+        r0, r1, r2 = r0 + y, r1 + y * x, r2 + y * x2
+    if n == 2.0:
+        value, slope = _chord(s1, s2, r0, r1)
+        return value, slope / scale, 0.0
+    value, slope, curvature = _normal_solution(n, s1, s2, s3, s4, r0, r1, r2)
+    return value, slope / scale, 2.0 * curvature / (scale * scale)
 
 
 def _turn_time(speed, acceleration, turns, otherwise):

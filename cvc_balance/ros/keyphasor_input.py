@@ -6,9 +6,10 @@ every 0.2 s until one appears (a subscription needs the type): std_msgs/Float64 
 sampled tach signal, sensor_msgs/TimeReference one message a mark. Both are read as raw
 CDR bytes.
 
-* **Float64**: each sample is stamped with its receive time (as ``speed``); its marks are
-  the crossings of the threshold (``keyphasor_edge``, ``keyphasor_threshold``: default
-  midway between the signal's levels), found as the samples come
+* **Float64**: each sample is stamped with its receive time (the node's clock, as
+  ``speed``'s); its marks are the crossings of the threshold (``keyphasor_edge``,
+  ``keyphasor_threshold``: default midway between the signal's levels), found as the
+  samples come
   (:class:`cvc_balance.physics.keyphasor.LiveSignal`) and checked looking back
   (:class:`~cvc_balance.physics.keyphasor.LiveMarks`). Each sample is a motion sample: the
   angle since the newest mark and the speed extrapolated along the constant-acceleration
@@ -25,8 +26,8 @@ with the reason. The marks' check is counted in the ``rotor balance`` status's v
 logged (once a second at most) when it repairs, drops or gives up on a mark.
 """
 
-from time import monotonic
 import struct
+from time import monotonic, time_ns
 
 import numpy as np
 from sensor_msgs.msg import TimeReference
@@ -66,6 +67,7 @@ class KeyphasorInput:
         self._record = None
         self._subscription = None
         self._timer = node.create_timer(DISCOVERY_PERIOD, node._guarded(self.discover))
+        self._system_time = not node.get_parameter('use_sim_time').value
 
     def discover(self):
         """Subscribe once the topic has a publisher of one keyphasor type; say any other."""
@@ -121,7 +123,8 @@ class KeyphasorInput:
     # -- samples ---------------------------------------------------------------------
 
     def _on_float64(self, data):
-        now = self.node.get_clock().now().nanoseconds
+        # The node's clock: system time unless use_sim_time (time_ns: 0.1 us, not 2.7).
+        now = time_ns() if self._system_time else self.node.get_clock().now().nanoseconds
         if self._record is not None:
             self._record(now, data)
         self.float64(data, now, monotonic())
@@ -174,7 +177,7 @@ class KeyphasorInput:
             length = end - start
             times = start + share * length
             angle, omega, _ = cubic_motion(share, cubic(length, start_speed, end_speed),
-                                           length)
+                                           1.0 / length)
             stamps = self.origin_ns + np.rint(times * 1e9).astype(np.int64)
             # As if each sample had come as long after its time as the mark did.
             late = received - (time - times)
