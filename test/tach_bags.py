@@ -140,11 +140,12 @@ def merge(path, *bags, change=None):
     """
     change = change or {}
     with BagWriter(path, chunk_bytes=1 << 16) as writer:
-        made = {}
+        made, copied = {}, set()
         for source in map(Bag, bags):
             for channel in source.channels.values():
-                if channel.topic in made.values():
+                if channel.topic in copied:
                     continue
+                copied.add(channel.topic)
                 for log_time, data in source.messages(channel):
                     topic, data = change.get(channel.topic, lambda t, d, c=channel: (
                         c.topic, d))(log_time, data)
