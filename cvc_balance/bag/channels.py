@@ -300,7 +300,7 @@ def keyphasor_motion(bag, topic=None, edge='rising', threshold=None,
         seconds = np.concatenate([(start[:, None] + per * length[:, None]).ravel(),
                                   marks.time[-1:]])
         time_ns = tach.origin_ns + np.rint(seconds * 1e9).astype(np.int64)
-    angle, omega, _ = marks.motion(tach.seconds(time_ns))
+    angle, omega, _ = marks.motion(tach.seconds(time_ns), acceleration=False)
     ok = np.isfinite(angle) & np.isfinite(omega)
     left_out = int((~ok).sum())
     reasons = [f'{left_out} keyphasor samples before the first mark, after the last or '

@@ -206,19 +206,39 @@ class Marks:
         bad_after = np.concatenate([~self.good, [True]])
         first = np.maximum.accumulate(np.where(bad_before, index, 0))
         last = np.minimum.accumulate(np.where(bad_after, index, n - 1)[::-1])[::-1]
-        width = np.minimum(last - first, max(int(span), 1))
+        span = max(int(span), 1)
+        width = np.minimum(last - first, span)
         lo = np.clip(index - width // 2, first, last - width)
-        columns = np.arange(max(int(span), 1) + 1)
-        rows = np.minimum(lo[:, None] + columns, n - 1)
-        valid = columns <= width[:, None]
-        _, speed, _ = fit_at_zero(self.time[rows] - self.time[:, None],
-                                  TWO_PI * (rows - index[:, None]), valid)
-        speed[width == 0] = np.nan
+        speed = np.full(n, np.nan)
+        # Most marks: a whole span centred on them (the windows are views of the times,
+        # the turns the same for all); the others (near a run's ends) gathered one by one.
+        centred = (width == span) & (lo == index - span // 2)
+        half = span // 2
+        centred = (width == span) & (lo == index - half)
+        if n > span and centred[half:n - span + half].any():
+            # Windows as slices of the times: point j of mark k is mark k - half + j.
+            middle = self.time[half:n - span + half]
+            offsets = np.stack([self.time[j:n - span + j] - middle for j in range(span + 1)])
+            inner = speed[half:n - span + half]
+            found = fit_at_zero(offsets, TWO_PI * (np.arange(span + 1) - half))[1]
+            use = centred[half:n - span + half]
+            inner[use] = found[use]
+        else:
+            centred[:] = False
+        other = ~centred & (width > 0)
+        if other.any():
+            columns = np.arange(span + 1)[:, None]
+            rows = np.minimum(lo[other] + columns, n - 1)
+            speed[other] = fit_at_zero(self.time[rows] - self.time[other],
+                                       TWO_PI * (rows - index[other]),
+                                       columns <= width[other])[1]
         return speed
 
-    def motion(self, time, span=SPAN_REVS):
+    def motion(self, time, span=SPAN_REVS, acceleration=True):
         """
         Return (angle, omega, alpha) at ``time`` (s): unwrapped rad, rad/s, rad/s^2.
+
+        ``acceleration`` False: alpha is None (not computed).
 
         Within a period, the cubic that turns from 2 pi k to 2 pi (k + 1) with the
         :meth:`fitted_speed` of its two marks as its slopes there (Hermite): exact at a
@@ -239,37 +259,52 @@ class Marks:
         rate = np.where(self.good, 1.0 / period, np.nan)
         table = np.stack([self.time[:-1], rate, *cubic(period, speed[:-1], speed[1:]),
                           TWO_PI * np.arange(n - 1)])
-        k = np.clip(np.searchsorted(self.time, time, side='right') - 1, 0, n - 2)
+        k = np.clip(_marks_before(self.time, time) - 1, 0, n - 2)
         mark, rate, a1, a2, a3, turns = table[:, k]
         share = (time - mark) * rate
-        angle, omega, alpha = cubic_motion(share, (a1, a2, a3), rate)
+        angle, omega, alpha = cubic_motion(share, (a1, a2, a3), rate, acceleration)
         angle += turns
         outside = (time < self.time[0]) | (time > self.time[-1])
         if outside.any():           # before the first mark, after the last
             for values in (angle, omega, alpha):
-                values[outside] = np.nan
+                if values is not None:
+                    values[outside] = np.nan
         return angle, omega, alpha
 
 
-def fit_at_zero(offsets, turns, valid):
+def fit_at_zero(offsets, turns, valid=None):
     """
     Return, per row, (value, slope, second derivative) at 0 of a least-squares quadratic.
 
-    ``offsets`` (rows, points) s, ``turns`` (rows, points) rad, ``valid`` (rows, points)
-    the points that count: two give the chord (its value, slope and 0), three or more the
-    quadratic's a + b x + c x^2 (a, b and 2 c, by Cramer's rule on the normal equations).
-    NaN for a row of fewer than two.
+    ``offsets`` (points, rows) s, ``turns`` (points, rows, or one per point for all) rad,
+    ``valid`` (points, rows; None: all) the points that count: two give the chord (its
+    value, slope and 0), three or more the quadratic's a + b x + c x^2 (a, b and 2 c, by
+    Cramer's rule on the normal equations). NaN for a row of fewer than two. The sums run
+    point by point over whole rows (a few long vectors, not many short ones).
     """
-    offsets, turns = np.asarray(offsets, float), np.asarray(turns, float)
-    weight = np.asarray(valid, bool)
-    scale = np.max(np.abs(np.where(weight, offsets, 0.0)), axis=1)
+    offsets = np.asarray(offsets, float)
+    turns = np.broadcast_to(np.asarray(turns, float).reshape(
+        len(offsets), -1), offsets.shape)
+    if valid is not None:       # the points that do not count: 0 (x and y), uncounted
+        weight = np.asarray(valid, bool)
+        offsets, turns = np.where(weight, offsets, 0.0), np.where(weight, turns, 0.0)
+        n = weight.sum(axis=0).astype(float)
+    else:
+        n = float(len(offsets))
+    scale = np.max(np.abs(offsets), axis=0)
     scale[~(scale > 0.0)] = 1.0
-    x = np.where(weight, offsets / scale[:, None], 0.0)      # within [-1, 1]
-    y = np.where(weight, turns, 0.0)
-    x2 = x * x
-    n, s1, s2 = weight.sum(axis=1).astype(float), x.sum(axis=1), x2.sum(axis=1)
-    s3, s4 = (x2 * x).sum(axis=1), (x2 * x2).sum(axis=1)
-    r0, r1, r2 = y.sum(axis=1), (y * x).sum(axis=1), (y * x2).sum(axis=1)
+    inverse = 1.0 / scale
+    s1, s2, s3, s4, r0, r1, r2 = (np.zeros(offsets.shape[1]) for _ in range(7))
+    for offset, y in zip(offsets, turns):
+        x = offset * inverse                                # within [-1, 1]
+        x2 = x * x
+        s1 += x
+        s2 += x2
+        s3 += x2 * x
+        s4 += x2 * x2
+        r0 += y
+        r1 += y * x
+        r2 += y * x2
     with np.errstate(divide='ignore', invalid='ignore'):
         a, b, c = _normal_solution(n, s1, s2, s3, s4, r0, r1, r2)
         through, chord = _chord(s1, s2, r0, r1)
@@ -311,16 +346,29 @@ def cubic(period, start_speed, end_speed):
     return start, 3.0 * TWO_PI - 2.0 * start - end, start + end - 2.0 * TWO_PI
 
 
-def cubic_motion(share, coefficients, rate):
+def cubic_motion(share, coefficients, rate, acceleration=True):
     """
     Return (angle since the period's mark rad, omega, alpha) of :func:`cubic` at ``share``.
 
-    ``rate``: 1 / the period's length (1/s).
+    ``rate``: 1 / the period's length (1/s); ``acceleration`` False: alpha None.
     """
     a1, a2, a3 = coefficients
     return (share * (a1 + share * (a2 + share * a3)),
             (a1 + share * (2.0 * a2 + 3.0 * share * a3)) * rate,
-            (2.0 * a2 + 6.0 * share * a3) * (rate * rate))
+            (2.0 * a2 + 6.0 * share * a3) * (rate * rate) if acceleration else None)
+
+
+def _marks_before(marks, time):
+    """
+    Return, per sample time, how many marks are at or before it (searchsorted, right).
+
+    Samples in order (as read from a bag): counted from where each mark falls among them
+    (a cumulative sum, not a search per sample).
+    """
+    if len(time) > 1 and np.all(time[1:] >= time[:-1]):
+        where = np.searchsorted(time, marks, side='left')
+        return np.cumsum(np.bincount(where, minlength=len(time) + 1)[:len(time)])
+    return np.searchsorted(marks, time, side='right')
 
 
 def marks_summary(topic, found, missed, doubled, irregular, revolutions):
