@@ -315,7 +315,8 @@ def test_missed_and_doubled_marks_are_counted_by_the_node_as_by_replay(runs, tmp
 def test_play_a_tach_bag_into_the_node(runs, kind, tmp_path):
     run, layout, bags, offline = runs
     node = NodeProcess('cvc_balance.ros.balance_monitor',
-                       ['-p', f'layout_file:={layout}', '-p', 'keyphasor_topic:=keyphasor'],
+                       ['-p', f'layout_file:={layout}', '-p', 'keyphasor_topic:=keyphasor',
+                        '-p', f'record_path:={tmp_path / "node.mcap"}'],
                        tmp_path / 'node.log')
     live = tmp_path / 'live.mcap'
     played = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bags[kind]),
@@ -331,6 +332,12 @@ def test_play_a_tach_bag_into_the_node(runs, kind, tmp_path):
     assert re.search(r'^      keyphasor /keyphasor: \d+ marks, 0 missed \(put back\), 0 doubled '
                      r'\(dropped\), \d+ irregular periods \(no angle there\), \d+ '
                      r'revolutions$', played.stdout, re.M), played.stdout
+    recorded = Bag(tmp_path / 'node.mcap')        # the node records the tach it took
+    [channel] = [c for c in recorded.channels.values() if c.topic == '/keyphasor']
+    assert channel.msg_type == tach_bags.TYPES[kind]
+    given = len(Bag(bags[kind]).messages(
+        next(c for c in Bag(bags[kind]).channels.values() if c.topic == '/keyphasor')))
+    assert 0.95 * given <= len(recorded.messages(channel)) <= given
     stamps, force = bearing_loads(live)
     if kind == 'time_reference':        # stamped from time_ref: replay's samples, late
         assert np.isin(offline[kind][0], stamps).all()
@@ -338,3 +345,13 @@ def test_play_a_tach_bag_into_the_node(runs, kind, tmp_path):
         assert difference.max() <= 1e-3
     else:                               # stamped on receipt: as many samples as replay's
         assert len(stamps) >= 0.8 * len(offline[kind][0])
+
+
+def test_a_bad_keyphasor_parameter_is_one_line_and_exit_2():
+    run = subprocess.run([sys.executable, '-m', 'cvc_balance.ros.balance_monitor',
+                          '--ros-args', '-p', 'keyphasor_topic:=tach', '-p',
+                          'keyphasor_edge:=up'], env=ros_environment(), capture_output=True,
+                         text=True, timeout=60)
+    assert run.returncode == 2
+    assert run.stderr.strip() == ("balance_monitor: error: parameter keyphasor_edge must be "
+                                  "rising or falling, got 'up'")
