@@ -280,14 +280,20 @@ def test_the_keyphasor_gives_motion_samples_as_the_encoder_does(rig):
     t = (motion.stamp - START_NS) * 1e-9
     error = np.angle(np.exp(1j * (motion.angle - theta(t))))
     steady = (t < STEADY) | (t > STEADY + RAMP)
-    assert np.max(np.abs(error[steady])) <= 1e-5          # rad; the edge is timed exactly
+    # The edge is timed exactly; the speed at a mark is fitted over 8 revolutions about it,
+    # so 5 revolutions (0.17 s) from the ramp the speeds, and the angle, are exact.
+    settled = (t < STEADY - 0.17) | (t > STEADY + RAMP + 0.17)
+    assert np.max(np.abs(error[settled])) <= 1e-5          # rad
+    assert np.max(np.abs(error)) <= 0.01       # measured 0.0041 beside the ramp's ends
     assert np.max(np.abs(motion.omega[steady] / speed(t[steady]) - 1.0)) <= 0.02
-    assert 'keyphasor /keyphasor: ' in motion.reasons[0] and '1 missed' in motion.reasons[0]
+    assert 'keyphasor /keyphasor: ' in motion.problems[0] and '1 missed' in motion.problems[0]
+    assert motion.reasons[0].endswith(' keyphasor samples before the first mark, after the '
+                                      'last or inside an irregular period: no angle there')
     timed = keyphasor_motion(bag, 'marks', samples_per_rev=16)
     assert len(timed.stamp) == 16 * read_keyphasor(bag, 'marks').marks.revolutions + 1
     t = (timed.stamp - START_NS) * 1e-9
     assert np.max(np.abs(np.angle(np.exp(1j * (timed.angle - theta(t)))))[
-        (t < STEADY) | (t > STEADY + RAMP)]) <= 1e-5
+        (t < STEADY - 0.17) | (t > STEADY + RAMP + 0.17)]) <= 1e-5
 
 
 def test_the_command_prints_what_people_read(rig):

@@ -29,7 +29,8 @@ from cvc_balance.bag.mcap_reader import (BagError, column, describe_topics, floa
                                          gather, MESSAGE_HEADER, MotionSamples)
 from cvc_balance.messages import topics
 from cvc_balance.physics.frames import wrap_angle
-from cvc_balance.physics.keyphasor import checked_marks, EDGES, signal_marks
+from cvc_balance.physics.keyphasor import (checked_marks, EDGES, marks_summary,
+                                           SAMPLES_PER_REV, signal_marks)
 
 FLOAT64, VECTOR3_STAMPED = topics.FLOAT64_TYPE, topics.VECTOR3_STAMPED_TYPE
 IMU, TIME_REFERENCE = topics.IMU_TYPE, topics.TIME_REFERENCE_TYPE
@@ -42,8 +43,6 @@ AXES = ('x', 'y', 'z')
 IMU_LINEAR_ACCELERATION = 200
 """Bytes after an Imu's header (8-aligned) to linear_acceleration: orientation (4 float64),
 its covariance (9), angular_velocity (3) and its covariance (9)."""
-SAMPLES_PER_REV = 64
-"""Motion samples a revolution made from a TimeReference keyphasor (it has no samples)."""
 CDR_LE = 0x0100
 """The encapsulation header's first two bytes (00 01: CDR, little endian) read as <u2."""
 
@@ -94,9 +93,8 @@ class Keyphasor:
     def summary(self):
         """Return one line saying what the marks' check found."""
         m = self.marks
-        return (f'keyphasor {self.channel.topic}: {m.found} marks, {m.missed} missed (put '
-                f'back), {m.doubled} doubled (dropped), {m.irregular} irregular periods (no '
-                f'angle there), {m.revolutions} revolutions')
+        return marks_summary(self.channel.topic, m.found, m.missed, m.doubled, m.irregular,
+                             m.revolutions)
 
 
 def parse_units(pairs):
@@ -288,8 +286,8 @@ def keyphasor_motion(bag, topic=None, edge='rising', threshold=None,
     omega rad/s), so a tach can stand in for joint_states: at a sampled tach's sample
     times, or ``samples_per_rev`` evenly spaced in every revolution of a TimeReference
     keyphasor. Samples without an angle (before the first mark, after the last, inside an
-    irregular period) are left out and counted as rejected, with the marks' check in
-    ``reasons``.
+    irregular period) are left out and counted as rejected (``reasons``); the marks'
+    check goes to ``problems`` when it repaired, dropped or left out a mark.
     """
     tach = read_keyphasor(bag, topic, edge, threshold)
     marks = tach.marks
@@ -302,12 +300,12 @@ def keyphasor_motion(bag, topic=None, edge='rising', threshold=None,
         seconds = np.concatenate([(start[:, None] + per * length[:, None]).ravel(),
                                   marks.time[-1:]])
         time_ns = tach.origin_ns + np.rint(seconds * 1e9).astype(np.int64)
-    angle, omega, _ = marks.motion(tach.seconds(time_ns))
+    angle, omega, _ = marks.motion(tach.seconds(time_ns), acceleration=False)
     ok = np.isfinite(angle) & np.isfinite(omega)
-    reasons = [tach.summary()] + tach.problems
     left_out = int((~ok).sum())
-    if left_out:
-        reasons.append(f'{left_out} keyphasor samples before the first mark, after the last '
-                       'or inside an irregular period: no angle there')
+    reasons = [f'{left_out} keyphasor samples before the first mark, after the last or '
+               'inside an irregular period: no angle there'] if left_out else []
+    problems = ([tach.summary()] if marks.missed or marks.doubled or marks.irregular
+                else []) + tach.problems
     return MotionSamples(time_ns[ok], time_ns[ok], wrap_angle(angle[ok]), omega[ok],
-                         left_out, reasons)
+                         left_out, reasons, problems=problems)

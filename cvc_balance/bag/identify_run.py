@@ -101,7 +101,7 @@ def identify_bag(bag_path, layout_file=None, joint_name='gantry_joint', window_r
             declared, residual(identified, declared), model, seg, cells))
         if observer is not None:
             observe(observer, segments[-1])
-    return segments, bag.problems + problems
+    return segments, bag.problems + motion.problems + problems
 
 
 def observe(observer, segment):

@@ -860,6 +860,9 @@ class MotionSamples:
 
     ``rejected`` messages could not be read; ``reasons`` say why. ``skipped``
     JointState messages do not carry the joint (``joints_seen``: the names they have).
+    ``problems``: what else the source's reader found (a keyphasor's marks repaired);
+    ``joint_topic``: the JointState topic when the angle and speed are its position and
+    velocity as sent (None for motion made from a speed or a keyphasor).
     """
 
     stamp: np.ndarray
@@ -870,6 +873,8 @@ class MotionSamples:
     reasons: list = field(default_factory=list)
     skipped: int = 0
     joints_seen: list = field(default_factory=list)
+    problems: list = field(default_factory=list)
+    joint_topic: str = None
 
 
 LAYOUTS = 16

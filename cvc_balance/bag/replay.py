@@ -11,10 +11,12 @@ import time
 
 import numpy as np
 
-from cvc_balance.bag.inputs import input_channels
+from cvc_balance.bag.channels import keyphasor_motion
+from cvc_balance.bag.inputs import input_channels, InputTopics
 from cvc_balance.bag.mcap_reader import (BagError, float64_samples, joint_samples,
                                          MotionSamples, string_samples)
 from cvc_balance.bag.rosbag2 import open_bag, open_writer
+from cvc_balance.identify.mistakes import run_motion_findings
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
 from cvc_balance.physics.engine import loads, RotorModel
@@ -58,6 +60,23 @@ class Segment:
     model: object = None       # the full RotorModel of the layout (the verdict's)
 
 
+@dataclass(frozen=True)
+class InputCheck:
+    """
+    A mistake the inputs show (:mod:`cvc_balance.identify.mistakes`), as the node says it.
+
+    ``input``: the topic (or 'load cells'); ``segment``: the layout segment (1 = the
+    first) for the cells, None for the motion; ``finding``: the Finding; ``seen``: in
+    how many of the ``judged`` windows (the motion's; 1 of 1 for a segment's cells).
+    """
+
+    input: str
+    segment: int
+    finding: object
+    seen: int = 1
+    judged: int = 1
+
+
 @dataclass
 class ReplaySummary:
     """What a replay read, computed and wrote."""
@@ -71,6 +90,7 @@ class ReplaySummary:
     skipped_reason: str = ''
     reasons: list = field(default_factory=list)
     problems: list = field(default_factory=list)
+    input_checks: list = field(default_factory=list)    # [InputCheck]
     segments: list = field(default_factory=list)
     seconds: float = 0.0
     output: str = ''
@@ -82,13 +102,20 @@ def read_inputs(bag, joint_name, names=None):
 
     joint_states (sensor_msgs/JointState) is used if present, else speed
     (std_msgs/Float64, angle integrated over log times as the node does over
-    receive times); ``names`` (:class:`cvc_balance.bag.inputs.InputTopics`) names
-    other topics. Raises BagError when the bag has neither, or when no JointState
+    receive times), else a keyphasor (:func:`cvc_balance.bag.channels.keyphasor_motion`:
+    the angle 0 at each mark, its marks' check in the samples' ``problems``);
+    ``names`` (:class:`cvc_balance.bag.inputs.InputTopics`) names other topics, or
+    the keyphasor. Raises BagError when the bag has none, or when no JointState
     carries the joint.
     """
+    names = names or InputTopics()
     channels = input_channels(bag, names)
-    if channels.joint_states is not None:
+    if channels.keyphasor is not None:
+        motion = keyphasor_motion(bag, channels.keyphasor.topic, names.keyphasor_edge,
+                                  names.keyphasor_threshold)
+    elif channels.joint_states is not None:
         motion = joint_samples(bag, channels.joint_states, joint_name)
+        motion.joint_topic = channels.joint_states.topic
         if not len(motion.stamp) and motion.skipped:
             raise BagError(f'{bag.path}: no {channels.joint_states.topic} message carries '
                            f"joint '{joint_name}' (they name: {', '.join(motion.joints_seen)}); "
@@ -177,11 +204,13 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     motion, layout_messages = read_inputs(bag, joint_name, names)
     summary.samples = len(motion.stamp) + motion.rejected + motion.skipped
     summary.reasons = list(motion.reasons)
+    summary.problems = list(motion.problems)
     summary.skipped = motion.skipped
     if motion.skipped:
         summary.skipped_reason = (f"{motion.skipped} JointState messages without joint "
                                   f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
-    in_force, summary.problems = layouts_in_force(bag, layout_messages, layout_file)
+    in_force, layout_problems = layouts_in_force(bag, layout_messages, layout_file)
+    summary.problems += layout_problems
     events = [(log_time, layout) for log_time, layout, _ in in_force]
     t = motion.stamp * 1e-9
     accepted, accepted_alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle,
@@ -200,6 +229,10 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     # alpha runs over every accepted sample (also those before a layout).
     alpha, = _where(in_time[accepted], accepted_alpha)
     summary.accepted = int(use.sum())
+    if motion.joint_topic is not None:     # the position and velocity as sent: their units
+        summary.input_checks = [
+            InputCheck(motion.joint_topic, None, finding, seen, judged)
+            for finding, seen, judged in run_motion_findings(stamp * 1e-9, angle, omega)]
     writer = open_writer(output, compression=compression,
                          level=LEVELS.get(compression)) if output else None
     channels = _output_channels(writer) if writer else None

@@ -14,9 +14,11 @@ import math
 
 from cvc_balance.bag.identify_run import identify_bag
 from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
-from cvc_balance.bag.replay import replay
+from cvc_balance.bag.replay import InputCheck, replay
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.identify.evidence import verdict_of_record
+from cvc_balance.identify.mistakes import (cell_mistakes, measured_static_loads,
+                                           MOTION_WINDOW, static_loads)
 from cvc_balance.messages import topics
 from cvc_balance.physics.assessment import verdict_record
 from cvc_balance.physics.engine import RotorModel
@@ -72,8 +74,12 @@ def replay_record(summary, identified=None, machine_id=None):
     segments by layout digest and start), or None; ``machine_id``: the bag's own.
     """
     by_start = {(s.layout.digest(), s.start_ns): s for s in identified or ()}
-    segments = [segment_record(s, by_start.get((s.layout.digest(), max(s.start_ns, 0))))
-                for s in summary.segments]
+    matched = [by_start.get((s.layout.digest(), max(s.start_ns, 0))) for s in summary.segments]
+    segments = [segment_record(s, found) for s, found in zip(summary.segments, matched)]
+    checks = list(summary.input_checks) + [
+        InputCheck('load cells', number, finding)
+        for number, found in enumerate(matched, start=1) if found is not None
+        for finding in cell_findings(found)]
     used = [s for s in summary.segments if s.first_ns is not None]
     first = min((s.first_ns for s in used), default=None)
     last = max((s.last_ns for s in used), default=None)
@@ -87,9 +93,26 @@ def replay_record(summary, identified=None, machine_id=None):
         'rejected_reasons': list(summary.reasons)
         + ([summary.skipped_reason] if summary.skipped else []),
         'problems': list(summary.problems),
+        'input_checks': [{'input': c.input, 'segment': c.segment, 'cause': c.finding.cause,
+                          'message': c.finding.message, 'figure': c.finding.figure,
+                          'windows': [c.seen, c.judged]} for c in checks],
         'seconds': summary.seconds, 'output': summary.output or None,
         'segments': segments,
     }
+
+
+def cell_findings(identified):
+    """
+    Return the mistakes an identified segment's cells show: [Finding] (none if not fitted).
+
+    Each cell's fitted static load against its support's weight share
+    (:func:`cvc_balance.identify.mistakes.cell_mistakes`), as the node checks it live.
+    """
+    if not identified.estimate.identifiable:
+        return []
+    read = {name: len(cell.time) for name, cell in (identified.cells or {}).items()}
+    measured = measured_static_loads(identified.model, identified.estimate, read)
+    return cell_mistakes(static_loads(identified.model), measured)
 
 
 def segment_record(segment, identified=None):
@@ -210,6 +233,7 @@ def format_replay(record):
              + (f", {record['skipped']} skipped" if record['skipped'] else '')]
     lines += [f'  rejected: {r}' for r in record['rejected_reasons']]
     lines += [f'  problem: {p}' for p in record['problems']]
+    lines += [f"  input check: {check_where(c)}: {c['message']}" for c in record['input_checks']]
     for segment in record['segments']:
         lines += _segment_lines(segment)
     rate = record['accepted'] / record['seconds'] if record['seconds'] else 0.0
@@ -218,6 +242,14 @@ def format_replay(record):
                  f'({rate / 1e6:.3f} M samples/s, read + compute{" + write" if output else ""})'
                  + (f'; wrote {output}' if output else ''))
     return '\n'.join(lines)
+
+
+def check_where(check):
+    """Say where an input check of a record looked: the topic, or a segment's cells."""
+    if check['segment'] is not None:
+        return f"{check['input']} of segment {check['segment']}"
+    seen, judged = check['windows']
+    return f"{check['input']} ({seen} of {judged} windows of {MOTION_WINDOW} samples)"
 
 
 def _segment_lines(segment):

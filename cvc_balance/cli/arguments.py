@@ -88,21 +88,41 @@ OUTPUT_BAG_HELP = ('bag to write: a .mcap file, or any other name for a rosbag2 
 
 
 def add_input_topics(parser):
-    """Add --joint-states, --speed and --layout: the bag's input topics, if not the node's."""
+    """Add the bag's input topics, if not the node's: motion (an encoder or a tach), layout."""
     parser.add_argument('--joint-states', type=topic_name, metavar='TOPIC',
                         help='JointState topic of the rotor (default: joint_states, also '
                         'under a namespace)')
     parser.add_argument('--speed', type=topic_name, metavar='TOPIC',
                         help='Float64 speed topic, used when there is no JointState (default: '
                         'speed); alone, it is used instead of joint_states')
+    add_keyphasor(parser, 'a once-per-revolution tach instead of an encoder: the rotor '
+                  'angle is 0 at each of its marks and interpolated between them, the speed '
+                  'the mean over 8 revolutions; missed and doubled marks are repaired or '
+                  'dropped and said (default: keyphasor, when the bag has neither '
+                  'joint_states nor speed)')
     parser.add_argument('--layout', type=topic_name, metavar='TOPIC',
                         help='String layout topic (default: layout)')
+
+
+def add_keyphasor(parser, what):
+    """Add --keyphasor TOPIC (``what`` it is for), --keyphasor-edge and --keyphasor-threshold."""
+    parser.add_argument('--keyphasor', type=topic_name, metavar='TOPIC',
+                        help=f'{what}. std_msgs/Float64: a sampled tach signal, each sample '
+                        'at its log time, the marks at the crossings of a threshold; or '
+                        'sensor_msgs/TimeReference: one message a mark, time_ref its time')
+    parser.add_argument('--keyphasor-edge', choices=('rising', 'falling'), default='rising',
+                        help='the crossing of a sampled tach that is the mark (default '
+                        'rising)')
+    parser.add_argument('--keyphasor-threshold', type=finite, metavar='LEVEL',
+                        help="a sampled tach's threshold, in its unit (default: midway "
+                        'between its low and high levels)')
 
 
 def input_topics(args):
     """Return the :class:`cvc_balance.bag.inputs.InputTopics` the options name."""
     from cvc_balance.bag.inputs import InputTopics
-    return InputTopics(args.joint_states, args.speed, args.layout)
+    return InputTopics(args.joint_states, args.speed, args.layout, args.keyphasor,
+                       args.keyphasor_edge, args.keyphasor_threshold)
 
 
 def print_json(data):

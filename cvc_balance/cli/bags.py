@@ -79,7 +79,9 @@ def register(commands):
     play = commands.add_parser('play', help='publish a bag\'s inputs live, record the outputs',
                                description='Publish the bag\'s layout and motion messages with '
                                'their timing (to drive a running balance_monitor) and record '
-                               'the node\'s outputs.')
+                               'the node\'s outputs. A tach (--keyphasor, or a bag with '
+                               'neither joint_states nor speed) goes out on keyphasor: start '
+                               'the node with -p keyphasor_topic:=keyphasor.')
     play.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
     add_bounded(play, '--rate', limit=limits.PLAY_RATE, default=1.0, metavar='X',
                 help='playback speed factor (default 1)')
@@ -244,7 +246,7 @@ def _play(args):
     if args.output:         # recorded live, in place (a killed run keeps its chunks)
         check_new_output(args.output)
         check_output(args.output, [args.bag], directory=not args.output.endswith('.mcap'))
-    return play_main(args)
+    return play_main(args, input_topics(args))
 
 
 def _info(args):

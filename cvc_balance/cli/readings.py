@@ -7,8 +7,8 @@ them; no encoder, layout or load cell needed (:mod:`cvc_balance.bag.readings`).
 
 import sys
 
-from cvc_balance.cli.arguments import (add_bounded, BAG_HELP, finite, input_bag, print_json,
-                                       topic_name)
+from cvc_balance.cli.arguments import (add_bounded, add_keyphasor, BAG_HELP, input_bag,
+                                       print_json)
 from cvc_balance.physics import limits
 
 
@@ -29,17 +29,8 @@ def register(commands):
         '"speed" (rad/s), "revolutions", "channels": [{"name", "unit", "amplitude", '
         '"phase_deg", "ci95"}]}]}')
     readings.add_argument('bag', type=input_bag, metavar='BAG', help=BAG_HELP)
-    readings.add_argument('--keyphasor', type=topic_name, metavar='TOPIC',
-                          help='the once-per-revolution mark: std_msgs/Float64 (a sampled '
-                          'tach signal, each sample at its log time) or sensor_msgs/'
-                          'TimeReference (one message a mark, time_ref its time) (default: '
-                          'keyphasor, also under a namespace)')
-    readings.add_argument('--keyphasor-edge', choices=('rising', 'falling'), default='rising',
-                          help='the crossing of a sampled tach that is the mark (default '
-                          'rising)')
-    readings.add_argument('--keyphasor-threshold', type=finite, metavar='LEVEL',
-                          help="a sampled tach's threshold, in its unit (default: midway "
-                          'between its low and high levels)')
+    add_keyphasor(readings, 'the once-per-revolution mark (default: keyphasor, also under '
+                  'a namespace)')
     readings.add_argument('--channel-unit', action='append', metavar='TOPIC=UNIT',
                           help="a channel's unit, e.g. accel=m/s^2 or probe=counts "
                           "(repeat for each topic; default: an Imu's m/s^2, others 'as "

@@ -15,7 +15,9 @@ Two checks, numpy only, for the live node (on its recent input) and offline comm
   the wrong support).
 
 Each returns :class:`Finding` objects: ``cause`` (a short key), ``message`` (one line
-naming the mistake, for a person) and the figure it rests on.
+naming the mistake, for a person) and the figure it rests on. Offline commands check a
+whole run as the node checks its recent input: :func:`run_motion_findings` over windows
+of :data:`MOTION_WINDOW` samples, :func:`measured_static_loads` of a fitted segment.
 """
 
 import cmath
@@ -24,6 +26,7 @@ import math
 
 import numpy as np
 
+from cvc_balance.identify.batch import channels
 from cvc_balance.physics.engine import sample_loads
 
 DEGREES_PER_RADIAN = 180.0 / math.pi
@@ -49,6 +52,10 @@ ANGLE_TOLERANCE = math.radians(25.0)
 """rad: a cell whose static load is turned less than this from its share is not "turned"."""
 MIN_SHARE = 0.2
 """Shares smaller than this fraction of the rotor's radial weight are not judged."""
+MOTION_WINDOW = 2000
+"""Motion samples the position/velocity check looks at once (the node's: 2 s at 1 kHz)."""
+RUN_WINDOWS = 16
+"""Most windows of a recorded run checked (evenly spread over it)."""
 
 
 @dataclass(frozen=True)
@@ -141,6 +148,29 @@ def motion_units(time, angle, omega):
     return MotionCheck(ratio, period, turned, _motion_finding(ratio, period))
 
 
+def run_motion_findings(time, angle, omega, window=MOTION_WINDOW, most=RUN_WINDOWS):
+    """
+    Return [(Finding, windows it was found in, windows that could tell)] of a recorded run.
+
+    :func:`motion_units` over up to ``most`` windows of ``window`` samples spread evenly
+    over the run (as the node looks at its last ``window``); one entry per cause, its
+    first window's Finding. ``time`` s, ``angle`` and ``omega`` as sent.
+    """
+    n = len(time)
+    starts = np.unique(np.linspace(0, max(n - window, 0), most).astype(np.int64))
+    found, told = {}, 0
+    for start in starts.tolist():
+        check = motion_units(time[start:start + window], angle[start:start + window],
+                             omega[start:start + window])
+        if check is None:
+            continue
+        told += 1
+        if check.finding is not None:
+            finding, count = found.get(check.finding.cause, (check.finding, 0))
+            found[check.finding.cause] = (finding, count + 1)
+    return [(finding, count, told) for finding, count in found.values()]
+
+
 def _near(value, target):
     return abs(value - target) <= RATIO_TOLERANCE * abs(target)
 
@@ -192,6 +222,18 @@ def static_loads(model):
         for name, (force, _) in sample_loads(model, q, 0.0, 0.0).supports.items():
             shares[name] += 0.25 * complex(force[0], force[1])
     return shares
+
+
+def measured_static_loads(model, estimate, read):
+    """
+    Return {support name: complex N}: the static load each cell reads (its fitted bias).
+
+    ``estimate``: a fit of ``model``'s cells (identifiable); ``read``: {support name:
+    readings taken}, the cells without readings left out.
+    """
+    layout = channels(model.supports)
+    return {support.name: estimate.biases[layout.index((k, 'force'))]
+            for k, support in enumerate(model.supports) if read.get(support.name)}
 
 
 def _matches(measured, expected, weight):

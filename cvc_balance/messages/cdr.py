@@ -230,6 +230,27 @@ def read_wrench_stamped(data):
     return sec, nanosec, values[:3], values[3:]
 
 
+_TIME = struct.Struct('<iI')
+
+
+def read_time_reference(data):
+    """
+    Decode sensor_msgs/msg/TimeReference CDR bytes: its ``time_ref`` (sec, nanosec).
+
+    The header (stamp, frame_id) comes first, then time_ref (aligned to 4), then the
+    source string. Raises ValueError on bytes that are no little-endian CDR
+    TimeReference.
+    """
+    if data[:4] != ENCAPSULATION_LE or len(data) < 16:
+        raise ValueError('not a little-endian CDR TimeReference')
+    (length,) = struct.unpack_from('<I', data, 12)
+    position = 16 + length
+    position += -(position - 4) % 4
+    if length < 1 or position + 8 > len(data):
+        raise ValueError('TimeReference frame_id beyond the message')
+    return _TIME.unpack_from(data, position)
+
+
 class JointStateReader:
     """
     One joint's stamp, position and velocity from JointState CDR bytes, without rclpy.

@@ -1,11 +1,11 @@
 """
 ROS 2 node ``balance_monitor``: live bearing loads, drive torque and unbalance.
 
-A thin adapter: it turns ``joint_states`` (or ``speed``) samples and the
-``layout`` into engine calls and publishes the results from the input
-callback, with no timer in between. The per-message path is plain Python
-floats (:func:`cvc_balance.physics.engine.sample_loads`), O(1) in the number of
-components; layout aggregates are computed once per layout.
+A thin adapter: it turns ``joint_states`` (or ``speed``, or a tach:
+:mod:`cvc_balance.ros.keyphasor_input`) samples and the ``layout`` into engine calls
+and publishes the results from the input callback, with no timer in between. The
+per-message path is plain Python floats (:func:`cvc_balance.physics.engine.sample_loads`),
+O(1) in the number of components; layout aggregates are computed once per layout.
 
 Topics: :data:`TOPICS` (what ``--help`` lists). The motion and cell inputs are read as
 raw CDR bytes (:mod:`cvc_balance.messages.cdr`): rclpy's message objects cost 15-20 us
@@ -59,6 +59,7 @@ from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.executor import spin
 from cvc_balance.ros.input_checks import InputChecks
+from cvc_balance.ros.keyphasor_input import KeyphasorInput
 from cvc_balance.ros.load_cells import LoadCells
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import BagRecorder
@@ -76,6 +77,16 @@ PARAMETERS = (
     # name, default, description, (min, max) for numbers
     ('joint_name', 'gantry_joint', 'JointState joint whose position (rad) and velocity '
      '(rad/s) are the rotor angle q and speed omega', None),
+    ('keyphasor_topic', '', 'a once-per-revolution tach instead of an encoder: '
+     'std_msgs/Float64 (a sampled tach signal, each sample at its receive time) or '
+     'sensor_msgs/TimeReference (one message a mark, time_ref its time), the type taken '
+     'from its publishers; the angle is 0 at each mark, missed and doubled marks are '
+     'repaired or dropped and counted; empty: off', None),
+    ('keyphasor_edge', 'rising', "the crossing of a sampled tach's threshold that is the "
+     'mark: rising or falling', None),
+    ('keyphasor_threshold', math.nan, "a sampled tach's threshold, in its unit; nan: "
+     "midway between the signal's low and high levels (learnt from its first 256 samples, "
+     'then its last 4096)', None),
     ('layout_file', '', 'layout file (YAML/JSON) to start with; empty: wait for one on '
      'the layout topic', None),
     ('stator_frame', STATOR_FRAME, 'frame_id of stator-frame outputs', None),
@@ -123,6 +134,12 @@ TOPICS = (
      "sample's time"),
     (topics.SPEED, topics.FLOAT64_TYPE, 'in', 'best effort: omega (rad/s) when no joint_states '
      'come; q is integrated over the receive times'),
+    ('<keyphasor_topic>', topics.FLOAT64_TYPE, 'in', 'best effort, when keyphasor_topic is '
+     'set: a sampled tach signal; each sample is a motion sample, the angle since the last '
+     'mark and the speed extrapolated along the last 8 revolutions'),
+    ('<keyphasor_topic>', topics.TIME_REFERENCE_TYPE, 'in', 'or one message a mark '
+     '(time_ref): each revolution is given as 64 motion samples interpolated between its '
+     'marks, one revolution late'),
     (topics.LAYOUT, topics.STRING_TYPE, 'in', 'reliable, transient local: the layout (YAML or '
      'JSON); one is parsed at a time and of those that come meanwhile the newest wins'),
     (topics.measured_load('<name>'), topics.WRENCH_TYPE, 'in', 'best effort: a load cell under '
@@ -235,6 +252,7 @@ class BalanceMonitor(Node):
         self._gate = StampGate(self.params['max_stamp_jump'])
         self._joints = JointStateReader(self.params['joint_name'])
         self._checks = InputChecks()
+        self._keyphasor = None          # the tach, when keyphasor_topic is set
         # Layouts are parsed and aggregated on their own thread, one at a time, and put in
         # force here; of those that come meanwhile only the newest waits (it wins).
         self._layout_worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix='layout')
@@ -270,6 +288,11 @@ class BalanceMonitor(Node):
                                  raw=True)
         self.create_subscription(String, topics.LAYOUT, self._guarded(self._on_layout),
                                  LAYOUT_QOS)
+        if self.params['keyphasor_topic']:
+            threshold = self.params['keyphasor_threshold']
+            self._keyphasor = KeyphasorInput(
+                self, self.params['keyphasor_topic'], self.params['keyphasor_edge'],
+                None if math.isnan(threshold) else threshold, sensor_qos)
         self.create_timer(self.params['diagnostics_period'],
                           self._guarded(self._publish_diagnostics))
 
@@ -278,6 +301,8 @@ class BalanceMonitor(Node):
         # print: rosout is gone once a signal has shut the context down.
         print('balance_monitor: motion samples: ' + ', '.join(
             f'{count} {name}' for name, count in self._counts.items()), flush=True)
+        if getattr(self, '_keyphasor', None) is not None:
+            print(f'balance_monitor: {self._keyphasor.summary()}', flush=True)
         if self._active is not None and any(self._active.cells.readings.values()):
             cells = self._active.cells
             print('balance_monitor: load cell readings (layout in force): ' + ', '.join(
@@ -360,6 +385,10 @@ class BalanceMonitor(Node):
         """Name where motion samples are awaited, and where JointState is, if not there."""
         joint, speed = self._resolved[topics.JOINT_STATES], self._resolved[topics.SPEED]
         text = f'{joint} or {speed}'
+        if self._keyphasor is not None:
+            text = f'{joint}, {speed} or the keyphasor {self._keyphasor.topic}'
+            if self.count_publishers(self._keyphasor.topic):
+                return text
         if self.count_publishers(joint) or self.count_publishers(speed):
             return text
         elsewhere = sorted(name for name, types in self.get_topic_names_and_types()
@@ -384,8 +413,12 @@ class BalanceMonitor(Node):
             return
         self._process(sec, nanosec, self._integrator.update(time, omega), omega)
 
-    def _process(self, sec, nanosec, angle, omega):
-        """Compute and publish the outputs of one motion sample; return whether it was used."""
+    def _process(self, sec, nanosec, angle, omega, received=None):
+        """
+        Compute and publish the outputs of one motion sample; return whether it was used.
+
+        ``received``: the sample's monotonic receive time (s; default now).
+        """
         if self._preparing is not None:
             self._take_prepared()       # a new layout takes effect between two samples
         active = self._active
@@ -393,7 +426,9 @@ class BalanceMonitor(Node):
             self._counts['dropped'] += 1
             self._log_throttled('dropped', 'warning', 'no layout yet: motion samples dropped')
             return False
-        time, received = stamp_seconds(sec, nanosec), monotonic()
+        time = stamp_seconds(sec, nanosec)
+        if received is None:
+            received = monotonic()
         problem = stamp_problem(sec, nanosec) or \
             sample_problem(time, None, angle, omega, self.params['max_speed']) or \
             self._gate.check(time, received)
@@ -577,6 +612,8 @@ class BalanceMonitor(Node):
                   'internal errors': self._internal_errors,
                   'last rejected input': self._last_rejection,
                   'last rejected layout': self._layout_error}
+        if self._keyphasor is not None:
+            values.update(self._keyphasor.values())
         period, rejected = now - self._period_start, self._period_rejected
         self._period_accepted, self._peak_load, self._period_start = 0, 0.0, now
         self._period_rejected = 0
@@ -749,6 +786,9 @@ class BalanceMonitor(Node):
             if name == 'balance_grade' and values[name] != 0.0:
                 # 0: the layout's; else a grade as a layout's (a 1e-300 grade divides to inf).
                 limits.check(values[name], limits.GRADE, 'parameter balance_grade')
+            if name == 'keyphasor_edge' and values[name] not in ('rising', 'falling'):
+                raise ValueError(f'parameter keyphasor_edge must be rising or falling, got '
+                                 f'{values[name]!r}')
             if name in ('joint_name', 'stator_frame', 'rotor_frame') and \
                     not (isinstance(values[name], str) and values[name].strip()):
                 raise ValueError(f'parameter {name} must be a non-empty string, got '
@@ -766,10 +806,11 @@ def usage():
              '[-r FROM:=TO] ...]',
              '',
              'ROS 2 node balance_monitor: bearing loads, drive torque and unbalance of a rotor',
-             'from its encoder (joint_states or speed) and its component layout, with the',
-             'ISO 21940-11 verdict on /diagnostics. Runs until SIGINT or SIGTERM. Topic names',
-             'are relative: -r __ns:=/gantry1 puts them under /gantry1, -r joint_states:=/x',
-             'remaps one. <name>: each support of the layout in force.',
+             'from its encoder (joint_states or speed) or tach (keyphasor_topic) and its',
+             'component layout, with the ISO 21940-11 verdict on /diagnostics. Runs until',
+             'SIGINT or SIGTERM. Topic names are relative: -r __ns:=/gantry1 puts them under',
+             '/gantry1, -r joint_states:=/x remaps one. <name>: each support of the layout in',
+             'force.',
              '']
     for direction, heading in (('in', 'inputs'), ('out', 'outputs')):
         lines.append(f'{heading}:')

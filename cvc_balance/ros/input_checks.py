@@ -9,11 +9,11 @@ node, and one log line per mistake when it is first seen (and one when all is we
 
 from collections import deque
 
-from cvc_balance.identify.batch import channels
-from cvc_balance.identify.mistakes import cell_mistakes, motion_units
+from cvc_balance.identify.mistakes import (cell_mistakes, measured_static_loads,
+                                           motion_units, MOTION_WINDOW)
 from cvc_balance.physics import assessment
 
-WINDOW = 2000
+WINDOW = MOTION_WINDOW
 """Motion samples the position/velocity check looks back over (2 s at 1 kHz)."""
 
 
@@ -56,11 +56,7 @@ class InputChecks:
                 findings.append(self.motion.finding)
         cells = active.cells
         if cells.found is not None and cells.found[0].identifiable:
-            estimate = cells.found[0]
-            layout = channels(cells.model.supports)
-            measured = {support.name: estimate.biases[layout.index((k, 'force'))]
-                        for k, support in enumerate(cells.model.supports)
-                        if cells.readings[support.name]}
+            measured = measured_static_loads(cells.model, cells.found[0], cells.readings)
             for name, got in measured.items():
                 values[f'cell {name} static load [N]'] = abs(got)
                 values[f'cell {name} share of the weight [N]'] = abs(active.shares[name])

@@ -2,8 +2,9 @@
 Play a bag's inputs into the ROS graph with their timing, and record what comes back.
 
 ``cvc-balance play BAG [--rate X] [-o OUT]``: layout messages go out latched
-(transient local), motion samples (joint_states or speed) as their raw bytes
-at their log times scaled by 1 / rate. After each layout the player pauses
+(transient local), motion samples (joint_states, speed, or a keyphasor's
+messages on ``keyphasor``: the node takes them with ``keyphasor_topic:=keyphasor``)
+as their raw bytes at their log times scaled by 1 / rate. After each layout the player pauses
 50 ms (bag time is then shifted) so that the node has it in force before the
 next sample. With ``-o`` the node's outputs (topics derived from the bag's
 layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
@@ -23,10 +24,11 @@ import sys
 import threading
 import time
 
-from cvc_balance.bag.inputs import input_channels, InputTopics
+from cvc_balance.bag.inputs import input_channels
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import read_string_message
+from cvc_balance.physics.keyphasor import marks_summary
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
 from cvc_balance.ros.recorder import message_class
 
@@ -90,6 +92,8 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
             (topics.JOINT_STATES, topics.JOINT_STATE_TYPE, input_qos(1000),
              channels.joint_states),
             (topics.SPEED, topics.FLOAT64_TYPE, input_qos(1000), channels.speed),
+            (topics.KEYPHASOR, channels.keyphasor and channels.keyphasor.msg_type,
+             input_qos(1000), channels.keyphasor),
             (topics.LAYOUT, topics.STRING_TYPE, LAYOUT_QOS, channels.layout)):
         if channel is not None:
             inputs.append((topic, msg_type, qos, bag.messages(channel)))
@@ -115,14 +119,17 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
                       for topic, msg_type, qos, _ in inputs}
         events = sorted((log_time, topic, data) for topic, _, _, messages in inputs
                         for log_time, data in messages)
-        motion = topics.JOINT_STATES if topics.JOINT_STATES in publishers else topics.SPEED
+        motion = next(t for t in (topics.JOINT_STATES, topics.SPEED, topics.KEYPHASOR)
+                      if t in publishers)
         name = node.resolve_topic_name(motion)
         say(f'play: waiting up to {wait:g} s for a node subscribed to {name} '
             '(balance_monitor)', flush=True)
         if not _wait(lambda: publishers[motion].get_subscription_count() > 0, wait):
+            hint = (f' with -p keyphasor_topic:={topics.KEYPHASOR}'
+                    if motion == topics.KEYPHASOR else '')
             raise PlayError(f'no node subscribed to {name} within {wait:g} s: start the '
-                            'balance_monitor node first (./dev.sh demo does), or wait longer '
-                            'with --wait')
+                            f'balance_monitor node first{hint} (./dev.sh demo does), or wait '
+                            'longer with --wait')
         subscribers = sorted({f"{i.node_namespace.rstrip('/')}/{i.node_name}"
                               for i in node.get_subscriptions_info_by_topic(name)
                               if 'UNKNOWN' not in i.node_name})
@@ -229,10 +236,12 @@ def _wait(condition, timeout):
     return True
 
 
-def play_main(args):
-    """Run ``cvc-balance play``; return the exit code (1: nothing to play into)."""
-    names = InputTopics(getattr(args, 'joint_states', None), getattr(args, 'speed', None),
-                        getattr(args, 'layout', None))
+def play_main(args, names=None):
+    """
+    Run ``cvc-balance play``; return the exit code (1: nothing to play into).
+
+    ``names`` (InputTopics): the bag's input topics, if not the node's own.
+    """
     try:
         published, report, verdicts = play(args.bag, args.rate, args.output, args.wait,
                                            names=names)
@@ -257,4 +266,9 @@ def format_verdicts(verdicts):
         if values.get('verdict source') == 'measured':     # the layout's, beside it
             lines.append(f"      the layout expects {values.get('layout verdict level', '?')}: "
                          f"{values.get('layout verdict', '')}")
+        if 'keyphasor marks' in values:             # the node's check of the tach's marks
+            lines.append('      ' + marks_summary(
+                values['keyphasor'].split(' ')[0], values['keyphasor marks'],
+                values['keyphasor missed (put back)'], values['keyphasor doubled (dropped)'],
+                values['keyphasor irregular periods'], values['keyphasor revolutions']))
     return '\n'.join(lines)
