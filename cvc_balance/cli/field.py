@@ -97,7 +97,7 @@ def register(commands):
         description='Per correction plane, the trial mass at the plane\'s radius that moves '
         'the load cells\' 1x readings by --standard-errors of the baseline run (their change '
         'as the layout\'s physics predicts it), capped so that the trial alone adds no more '
-        'unbalance than the grade allows in its plane and no more rotating force than 10 %% '
+        'unbalance than the grade allows in its plane and no more rotating force than 10 % '
         'of a bearing\'s static load (the common starting rule, used when no baseline is '
         'given), rounded up to the kit.')
     trial.add_argument('bag', nargs='?', type=input_bag, metavar='BASELINE',

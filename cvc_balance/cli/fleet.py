@@ -52,7 +52,7 @@ def register(commands):
         'trends', help="each machine's unbalance over time, its drift, when it leaves grade",
         description='Per machine and correction plane: the unbalance of every run (identified '
         "from load cells where there are some, else the layout's) against its grade, a drift "
-        'fitted across layout changes with its 95 %% interval, and the date it is projected '
+        'fitted across layout changes with its 95 % interval, and the date it is projected '
         'to leave the grade; the machines ranked by urgency.')
     trends.add_argument('results', type=input_path, metavar='RESULTS',
                         help='a table written by fleet')
