@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).parent / '_ext'))
 project = 'cvc_balance'
 author = 'cvc_balance developers'
 copyright = '2026, cvc_balance developers (Apache-2.0)'
-extensions = ['myst_parser', 'cvc_reference']
+extensions = ['myst_parser', 'cvc_reference', 'cvc_formats']
 source_suffix = {'.md': 'markdown'}
 root_doc = 'index'
 exclude_patterns = ['_build', 'README.md']
