@@ -25,5 +25,6 @@ html_theme = 'alabaster'
 html_theme_options = {'page_width': '1100px', 'sidebar_width': '240px'}
 html_title = 'cvc_balance'
 # Pictures live beside the pages that show them (docs/*.png); nothing is fetched at build.
-html_static_path = []
+html_static_path = ['_static']
+html_css_files = ['cvc.css']     # console output wraps instead of scrolling
 smartquotes = False   # options keep their two hyphens (--target-probability)
