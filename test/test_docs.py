@@ -70,13 +70,13 @@ def test_every_topic_and_parameter_of_the_node_is_in_the_reference(site):
 
 
 def test_no_help_text_says_a_doubled_percent_sign(site):
-    """argparse formats help strings, not descriptions: a description's '%%' shows as typed."""
+    """Descriptions are not %-formatted by argparse (help strings are): '%%' shows as typed."""
     page = text_of(site / 'reference' / 'commands.html')
     assert '%%' not in page, page[max(0, page.index('%%') - 80):page.index('%%') + 20]
 
 
 def probe_known_fields(document, path):
-    """The fields the layout reader lists when ``path`` of ``document`` has one it does not know."""
+    """Return the fields the layout reader lists when ``path`` of ``document`` has another."""
     import copy
     import json
     from cvc_balance.physics.layout import LayoutError

@@ -83,7 +83,7 @@ def test_every_link_and_picture_exists():
 
 
 def sandbox(tmp_path):
-    """A folder that looks to dev.sh like the checkout (its .venv, bags, config) but its own."""
+    """Return a folder that looks to dev.sh like the checkout (its .venv, bags, config)."""
     for name in ('dev.sh', '.venv', 'requirements.txt', 'requirements-test.txt', 'setup.py',
                  'bags', 'config'):
         (tmp_path / name).symlink_to(ROOT / name)

@@ -1,11 +1,11 @@
-"""
+r"""
 Run a page's shell session as written: the ``$ COMMAND`` lines of a Markdown page, in order.
 
 A page (a tutorial, the README) shows what a person types after ``$ `` and, under it, lines
 the command prints. Here each command is run in order in one folder, and each line shown
 under it must be a line it printed (stdout or stderr, stripped; a ROS log line also without
 its ``[LEVEL] [time] [node]: `` prefix). A line ``...`` stands for lines left out, and
-``...`` within a line for any text (a path's start). A command ending in `` \\`` goes on on
+``...`` within a line for any text (a path's start). A command ending in `` \`` goes on on
 the next line; one ending in ``&`` runs in the background until the page is done (then
 SIGINT, and it must exit 0); `` # `` starts a comment.
 

@@ -200,7 +200,7 @@ def _probe(answer, base, path, change):
 
 
 def _layout_base(section):
-    """The probe layout, with a shape or an inertia on the component when the section is one."""
+    """Return the probe layout, with a shape or an inertia on its component for those sections."""
     base = copy.deepcopy(LAYOUT_PROBE)
     if section == 'shape':
         base['components'][0]['shape'] = {'type': 'cylinder', 'radius': 0.1, 'length': 0.2}
