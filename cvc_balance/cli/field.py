@@ -1,5 +1,6 @@
 """
-Field balancing commands: calibrate, influence, correct and report (README "Field balancing").
+Field balancing commands: calibrate, influence, correct and report (the docs' "Field
+balancing").
 
 ``calibrate`` makes influence coefficients from recorded baseline and trial runs and saves
 them; ``influence`` does the same from readings typed in by hand and gives the
@@ -237,8 +238,8 @@ def run_calibrate(args):
     warn(record['warnings'])
     if args.output:
         with replaced_when_done(args.output) as path:
-            path.write_text('# Influence coefficients (cvc-balance calibrate; README "Field '
-                            'balancing")\n' + dump_document(record))
+            path.write_text('# Influence coefficients (cvc-balance calibrate; the format: the '
+                            'docs\' "Coefficient file")\n' + dump_document(record))
     if args.json:
         print_json(record)
     else:
@@ -516,7 +517,7 @@ def run_influence(args):
         record['warnings'] = summary['warnings']
         with replaced_when_done(args.output) as path:
             path.write_text('# Influence coefficients (cvc-balance influence, readings by hand; '
-                            'README "Field balancing")\n'
+                            'the format: the docs\' "Coefficient file")\n'
                             + dump_document(plain(record)))
         summary['written'] = args.output
     if args.json:
@@ -721,7 +722,7 @@ def layout_expects(layout, grade):
 
 
 def summarise(result, record=None):
-    """Return a FieldCorrection as JSON-able data (schema in the README)."""
+    """Return a FieldCorrection as JSON-able data (its fields: the docs' "JSON outputs")."""
     import numpy as np
 
     run, problem, grade = result.run, result.problem, result.grade

@@ -5,7 +5,7 @@
 on Dask (an embedded LocalCluster, or ``--scheduler``) or in this process, into a Parquet
 table and a table of failures; ``trends RESULTS`` fits each machine's drift per plane and
 ranks the machines by when they leave their grade; ``simulate-fleet`` writes a fleet of
-simulated runs to try both on (README "A fleet of gantries").
+simulated runs to try both on (the docs' "Watch a fleet").
 """
 
 import argparse

@@ -529,8 +529,9 @@ def json_page(coefficients):
         'unless a field\'s name says `g_mm`, `deg`, ...). Each outline below is what the '
         'command printed of the bundled inputs when this page was built (lists show their '
         'first item), so it is the output\'s shape today, with a value of each field. '
-        'Values are rounded to 6 digits here. Commands not shown: `readings --json` (its `--help` gives the shape), `report '
-        '--json` (`{report, files, summary}`, the summary as `correct`\'s), `trends --json`, '
+        'Values are rounded to 6 digits here. Commands not shown: `readings --json` (its '
+        '`--help` gives the shape), `report --json` (`{report, files, summary}`, the summary '
+        'as `correct`\'s), `trends --json`, '
         '`calibrate --json` (the [coefficient record](coefficient_file.md)).', '']
     for name, args, text in JSON_COMMANDS:
         args = [coefficients if a == '{coefficients}' else a for a in args]
