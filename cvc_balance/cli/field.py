@@ -1,6 +1,5 @@
 """
-Field balancing commands: calibrate, influence, correct and report (the docs' "Field
-balancing").
+Field balancing commands: calibrate, influence, correct and report (docs: Field balancing).
 
 ``calibrate`` makes influence coefficients from recorded baseline and trial runs and saves
 them; ``influence`` does the same from readings typed in by hand and gives the
