@@ -25,6 +25,7 @@ from pathlib import Path
 import re
 import tempfile
 
+from cvc_reference import write_generated
 from sphinx.util import logging
 
 LOG = logging.getLogger(__name__)
@@ -35,11 +36,6 @@ def _md(text):
     """Return ``text`` as inline code, safe in Markdown (backticks doubled where needed)."""
     text = str(text)
     return f'`` {text} ``' if '`' in text else f'`{text}`'
-
-
-def _escape(text):
-    """Return ``text`` safe inside a Markdown table cell."""
-    return str(text).replace('|', '\\|').replace('<', '&lt;').replace('\n', ' ')
 
 
 def _known(message):
@@ -554,10 +550,10 @@ def json_page(coefficients):
               '`residual_*`, null without cells). Times are UTC timestamps. Its columns, from '
               'the schema the tool writes (`cvc_balance/fleet/rows.py`):', '',
               '| column | type |', '|---|---|']
-    lines += [f'| `{f.name}` | {_escape(f.type)} |' for f in RESULT_SCHEMA]
+    lines += [f'| `{f.name}` | {_md(f.type)} |' for f in RESULT_SCHEMA]
     lines += ['', 'Beside it, `RESULTS.failures.parquet`, one row per bag that could not be '
               'analysed:', '', '| column | type |', '|---|---|']
-    lines += [f'| `{f.name}` | {_escape(f.type)} |' for f in FAILURE_SCHEMA]
+    lines += [f'| `{f.name}` | {_md(f.type)} |' for f in FAILURE_SCHEMA]
     lines.append('')
     return '\n'.join(lines)
 
@@ -573,17 +569,12 @@ def calibrated(folder):
 
 def write_pages(app):
     """Write the pages into the source folder's reference/ (ignored by git)."""
-    folder = Path(app.srcdir) / 'reference'
-    folder.mkdir(exist_ok=True)
     with tempfile.TemporaryDirectory() as scratch:
         coefficients, record = calibrated(scratch)
-        pages = {'layout_file.md': layout_page(), 'tolerance_file.md': tolerance_page(),
-                 'coefficient_file.md': coefficient_page(record),
-                 'json_outputs.md': json_page(coefficients)}
-    for name, text in pages.items():
-        path = folder / name
-        if not path.exists() or path.read_text() != text:
-            path.write_text(text)
+        write_generated(app.srcdir, {
+            'layout_file.md': layout_page(), 'tolerance_file.md': tolerance_page(),
+            'coefficient_file.md': coefficient_page(record),
+            'json_outputs.md': json_page(coefficients)})
 
 
 def setup(app):

@@ -146,15 +146,20 @@ def tests_page():
     return '\n'.join(lines) + '\n'
 
 
-def write_pages(app):
-    """Write the generated pages into the source folder (ignored by git)."""
-    folder = Path(app.srcdir) / 'reference'
+def write_generated(srcdir, pages):
+    """Write {name: Markdown} into ``srcdir``/reference (ignored by git), where it changed."""
+    folder = Path(srcdir) / 'reference'
     folder.mkdir(exist_ok=True)
-    for name, text in (('commands.md', commands_page()), ('node.md', node_page()),
-                       ('modules.md', modules_page()), ('tests.md', tests_page())):
+    for name, text in pages.items():
         path = folder / name
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
+
+
+def write_pages(app):
+    """Write the generated pages into the source folder (ignored by git)."""
+    write_generated(app.srcdir, {'commands.md': commands_page(), 'node.md': node_page(),
+                                 'modules.md': modules_page(), 'tests.md': tests_page()})
 
 
 def setup(app):
