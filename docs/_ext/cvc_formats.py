@@ -9,6 +9,8 @@ At ``builder-inited`` it writes, under ``reference/``:
   the reader's own answers to a probe document. Only the meaning of each field is written
   here, and a field the reader knows without a meaning here, or a meaning for a field it
   does not know, is a build warning (an error under ``-W``).
+- ``limits.md``: the range, unit and reason of every number the package accepts, from the
+  one table every reader checks (``cvc_balance/physics/limits.py``).
 - ``json_outputs.md``: what each command prints with ``--json``, run on the bundled bags
   and layouts at build time, as an outline of its fields with their values there; and the
   fleet tables' columns, from their Arrow schemas.
@@ -25,7 +27,7 @@ from pathlib import Path
 import re
 import tempfile
 
-from cvc_reference import write_generated
+from cvc_reference import _escape, write_generated
 from sphinx.util import logging
 
 LOG = logging.getLogger(__name__)
@@ -268,7 +270,8 @@ def layout_page():
         '`layout` topic.', '',
         'This page is written at build time from the reader itself '
         '(`cvc_balance/physics/layout.py`, `layout_file.py`): the fields it knows, which it '
-        'needs, and its answer to a bad value of each, asked of it on a small layout. '
+        'needs, and its answer to a bad value of each, asked of it on a small layout; every '
+        'range it says is from the one table of [ranges](limits.md). '
         'Frames, signs and units: [frames](../explanation/frames.md). A valid layout can '
         'still hold a unit mistake (a radius in mm): those get warnings, see '
         '[plausibility warnings](../explanation/verdict.md#plausibility-warnings).', '',
@@ -574,10 +577,46 @@ def write_pages(app):
         write_generated(app.srcdir, {
             'layout_file.md': layout_page(), 'tolerance_file.md': tolerance_page(),
             'coefficient_file.md': coefficient_page(record),
-            'json_outputs.md': json_page(coefficients)})
+            'json_outputs.md': json_page(coefficients), 'limits.md': limits_page()})
 
 
 def setup(app):
     """Register the page writer."""
     app.connect('builder-inited', write_pages)
     return {'version': '1', 'parallel_read_safe': True}
+
+
+# -- ranges ----------------------------------------------------------------------------
+
+def limits_page():
+    """Return the Markdown of every quantity's accepted range, from physics/limits.py."""
+    import ast
+    from cvc_balance.physics import limits
+    source = (ROOT / 'cvc_balance' / 'physics' / 'limits.py').read_text(encoding='utf-8')
+    sections = {number: line.strip('# -').strip() for number, line
+                in enumerate(source.splitlines(), 1) if line.startswith('# -- ')}
+    lines = ['# Ranges', '',
+             'The range of every number the package accepts from people (in a layout, a '
+             'tolerance file, a scenario, an option), with its unit and why: one table, '
+             '`cvc_balance/physics/limits.py`, which every reader checks; this page is written '
+             'from it at build time. A refusal is one line naming the field, the value, the '
+             'range and its unit: the [layout file](layout_file.md) shows the readers\' own '
+             'words.']
+    body = ast.parse(source).body
+    heading = None
+    for node, following in zip(body, body[1:] + [None]):
+        if not (isinstance(node, ast.Assign) and len(node.targets) == 1
+                and isinstance(getattr(limits, node.targets[0].id, None), limits.Limit)):
+            continue
+        section = max((n for n in sections if n < node.lineno), default=None)
+        if section != heading:
+            heading = section
+            title = sections.get(section, 'others')
+            lines += ['', f'## {title[0].upper()}{title[1:]}', '',
+                      '| quantity | range | why |', '|---|---|---|']
+        limit = getattr(limits, node.targets[0].id)
+        what = following.value.value if isinstance(following, ast.Expr) and \
+            isinstance(following.value, ast.Constant) else ''
+        lines.append(f"| {_md(node.targets[0].id)}: {_escape(' '.join(what.split()))} | "
+                     f"{limit.describe()} | {_escape(' '.join(limit.reason.split()))} |")
+    return '\n'.join(lines) + '\n'
