@@ -150,3 +150,14 @@ def test_every_command_shown_on_the_other_pages_runs(tmp_path):
             folder.mkdir()
             ran += len(run_page(text, folder))
     assert ran >= 1
+
+
+def test_the_ranges_page_has_every_limit_with_its_range(site):
+    from cvc_balance.physics import limits
+    page = text_of(site / 'reference' / 'limits.html')
+    found = {name: value for name, value in vars(limits).items()
+             if isinstance(value, limits.Limit)}
+    assert len(found) > 30
+    for name, limit in found.items():
+        assert f'{name} :' in page or f'{name}:' in page, name
+        assert limit.describe() in page, (name, limit.describe())
