@@ -60,7 +60,7 @@ class PinocchioRotor:
 
         Force U omega^2 with U = m c_xy; torque omega^2 (-P_yz, P_xz, 0) with the product
         integrals P = int x z dm, int y z dm about the centre of mass (minus the tensor's
-        elements): the convention of the README's topic table.
+        elements): the convention of the `unbalance` topic (docs: frames).
         """
         body = self.model.inertias[1]
         mass, com, inertia = body.mass, np.array(body.lever), np.array(body.inertia)

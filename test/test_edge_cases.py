@@ -859,7 +859,7 @@ ONE = [{'name': 'slewing', 'z': 0.1}]
 @pytest.mark.parametrize('supports', [TWO, ONE], ids=['two supports', 'one support'])
 def test_model_choice_worst_cases_by_hand(supports):
     """
-    Each model's stated deviation against the bounds of the README's table, by hand.
+    Each model's stated deviation against the bounds of the model-choice table (docs), by hand.
 
     Planar: |S_xy| |g_z| + |S_z| |g_xy| + (alpha + omega^2) (|P| + sum |(I_xz, I_yz)|);
     point masses: (alpha + omega^2) sum |(I_xz, I_yz)| and alpha sum I_zz,own; a support

@@ -1,7 +1,7 @@
 """
 Influence coefficients on a real rotor: a balancing rig's known weight, predicted back.
 
-The recording (docs/guide/real_data.md; ``test_real_rig.py`` reads it and checks its 1x
+The recording (docs/validation/real_data.md; ``test_real_rig.py`` reads it and checks its 1x
 against plain fits): github.com/hstarmans/rotorbalancer @ 7b7d24915e157335320b43085016d6d92906e491
 (GPL-3.0, not copied here: read from shared/recordings, skipped when absent). Ten runs of a
 small rotor without its balance weight and ten with 0.060 g of putty, an IR keyphasor and an

@@ -1,7 +1,7 @@
 """
 The layout contract in full: every refusal's whole message, the balancing settings' effect.
 
-The messages are part of the contract (README: one line naming the component and the
+The messages are part of the contract (docs: layout file; one line naming the component and the
 field, then what is wrong and the value given); their whole text is written here, so that
 a changed message is a decision and not an accident. In-process and fast, so that the
 mutation run (benchmarks/mutation.py) can afford them; test_layout.py checks the command

@@ -2,7 +2,7 @@
 A real recording: a small balancing rig's tach and accelerometer, before and after.
 
 Its IR tach and accelerometer, without and with its balance weight
-(docs/guide/real_data.md).
+(docs/validation/real_data.md).
 
 Source: github.com/hstarmans/rotorbalancer, commit 7b7d24915e157335320b43085016d6d92906e491
 ("added measurements", 2021-07-01), licence GPL-3.0 (its LICENSE). A polygon-mirror motor
@@ -121,7 +121,7 @@ def independent_1x(record, start, end):
 def readings(tmp_path_factory):
     if not (RECORDINGS / 'without_weight' / '100.p').is_file():
         pytest.skip(f'the real recording is not in {RECORDINGS}: copy {SOURCE} there '
-                    '(docs/guide/real_data.md)')
+                    '(docs/validation/real_data.md)')
     folder = tmp_path_factory.mktemp('rig')
     out = {}
     for case in ('without_weight', 'weight'):

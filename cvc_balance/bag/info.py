@@ -221,7 +221,7 @@ def format_info(info):
 
 
 def info_record(info):
-    """Return ``cvc-balance info --json``'s object (times in ns; see the README's "Bags")."""
+    """Return ``cvc-balance info --json``'s object (times in ns; the docs' "JSON outputs")."""
     return {
         'path': info.path, 'files': info.files, 'bag_size': info.size,
         'storage_identifier': info.storage, 'ros_distro': info.ros_distro or None,

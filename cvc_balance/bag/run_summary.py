@@ -4,7 +4,7 @@ A recorded run as one plain record: what ``cvc-balance replay BAG --json`` print
 :func:`analyse_bag` replays a bag (no output written) and, when it has load cells
 (``supports/<name>/measured_load``), identifies each layout segment's real unbalance
 (:func:`cvc_balance.bag.identify_run.identify_bag`); :func:`replay_record` turns that into
-JSON-able data (schema in the README, "Bags"). The fleet tool (:mod:`cvc_balance.fleet`)
+JSON-able data (its fields: the docs' "JSON outputs"). The fleet tool (:mod:`cvc_balance.fleet`)
 flattens the same record into its table, so a fleet row and ``replay --json`` of the same
 bag cannot disagree. SI units; g mm and degrees where people read them, named in the key.
 """

@@ -52,8 +52,9 @@ def register(commands):
                         help='progress bar (default: on a terminal)')
     replay.add_argument('--rrd', metavar='RUN.rrd', help='also log the run for rerun')
     replay.add_argument('--json', action='store_true',
-                        help='print the summary as one JSON object (README "Bags"); with '
-                        'load cells in the bag, each segment\'s identified unbalance too')
+                        help='print the summary as one JSON object (its fields: the docs\' '
+                        '"JSON outputs"); with load cells in the bag, each segment\'s '
+                        'identified unbalance too')
     replay.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
                         help='largest change accepted in the forces (N), moments (N m) and '
                         'drive torque (N m), inf for an output not asked: each layout takes '

@@ -51,7 +51,7 @@ def register(commands):
         '--target-probability, which tolerances to tighten to reach it at least cost.')
     _layout_argument(tolerance)
     tolerance.add_argument('--tolerances', type=input_file, required=True, metavar='TOL',
-                           help='tolerance file (YAML or JSON; see README)')
+                           help='tolerance file (YAML or JSON; the docs\' "Tolerance file")')
     add_bounded(tolerance, '--samples', limit=limits.DRAWS, default=DEFAULT_SAMPLES,
                 metavar='N', help=f'Monte-Carlo draws (default {DEFAULT_SAMPLES})')
     add_bounded(tolerance, '--seed', limit=limits.SEED, default=0, metavar='S',

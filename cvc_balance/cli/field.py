@@ -1,5 +1,5 @@
 """
-Field balancing commands: calibrate, influence, correct and report (README "Field balancing").
+Field balancing commands: calibrate, influence, correct and report (docs: Field balancing).
 
 ``calibrate`` makes influence coefficients from recorded baseline and trial runs and saves
 them; ``influence`` does the same from readings typed in by hand and gives the
@@ -97,7 +97,7 @@ def register(commands):
         description='Per correction plane, the trial mass at the plane\'s radius that moves '
         'the load cells\' 1x readings by --standard-errors of the baseline run (their change '
         'as the layout\'s physics predicts it), capped so that the trial alone adds no more '
-        'unbalance than the grade allows in its plane and no more rotating force than 10 %% '
+        'unbalance than the grade allows in its plane and no more rotating force than 10 % '
         'of a bearing\'s static load (the common starting rule, used when no baseline is '
         'given), rounded up to the kit.')
     trial.add_argument('bag', nargs='?', type=input_bag, metavar='BASELINE',
@@ -237,8 +237,8 @@ def run_calibrate(args):
     warn(record['warnings'])
     if args.output:
         with replaced_when_done(args.output) as path:
-            path.write_text('# Influence coefficients (cvc-balance calibrate; README "Field '
-                            'balancing")\n' + dump_document(record))
+            path.write_text('# Influence coefficients (cvc-balance calibrate; the format: the '
+                            'docs\' "Coefficient file")\n' + dump_document(record))
     if args.json:
         print_json(record)
     else:
@@ -516,7 +516,7 @@ def run_influence(args):
         record['warnings'] = summary['warnings']
         with replaced_when_done(args.output) as path:
             path.write_text('# Influence coefficients (cvc-balance influence, readings by hand; '
-                            'README "Field balancing")\n'
+                            'the format: the docs\' "Coefficient file")\n'
                             + dump_document(plain(record)))
         summary['written'] = args.output
     if args.json:
@@ -721,7 +721,7 @@ def layout_expects(layout, grade):
 
 
 def summarise(result, record=None):
-    """Return a FieldCorrection as JSON-able data (schema in the README)."""
+    """Return a FieldCorrection as JSON-able data (its fields: the docs' "JSON outputs")."""
     import numpy as np
 
     run, problem, grade = result.run, result.problem, result.grade

@@ -5,7 +5,7 @@
 on Dask (an embedded LocalCluster, or ``--scheduler``) or in this process, into a Parquet
 table and a table of failures; ``trends RESULTS`` fits each machine's drift per plane and
 ranks the machines by when they leave their grade; ``simulate-fleet`` writes a fleet of
-simulated runs to try both on (README "A fleet of gantries").
+simulated runs to try both on (the docs' "Watch a fleet").
 """
 
 import argparse
@@ -52,7 +52,7 @@ def register(commands):
         'trends', help="each machine's unbalance over time, its drift, when it leaves grade",
         description='Per machine and correction plane: the unbalance of every run (identified '
         "from load cells where there are some, else the layout's) against its grade, a drift "
-        'fitted across layout changes with its 95 %% interval, and the date it is projected '
+        'fitted across layout changes with its 95 % interval, and the date it is projected '
         'to leave the grade; the machines ranked by urgency.')
     trends.add_argument('results', type=input_path, metavar='RESULTS',
                         help='a table written by fleet')

@@ -4,7 +4,7 @@
 For each layout segment of a recorded run: the verdict of record (the measured rotor's,
 against its grade, with what the layout expects beside it), the unbalance identified from
 the cells, the layout's, the residual (what the layout does not know) with 95 % radii, and
-the fit's rms; a table for people or, with ``--json``, one object (README "Monitor the real
+the fit's rms; a table for people or, with ``--json``, one object (the docs' "The measured
 rotor"). A bag without load cells is refused (exit 1) with the topics it has: nothing reads
 as a result when there is none.
 """

@@ -21,7 +21,7 @@ def register(commands):
         'vibration channel of a bag (std_msgs/Float64 topics at their log times; '
         'geometry_msgs/Vector3Stamped and sensor_msgs/Imu linear acceleration as TOPIC/x, '
         '/y, /z at their header stamps) against a keyphasor, for every stretch of at least '
-        '8 revolutions at steady speed, with its 95 %% radius, the speed and the '
+        '8 revolutions at steady speed, with its 95 % radius, the speed and the '
         'revolutions used. Phase: degrees 0-360, the LAG from the mark to the channel\'s '
         'first positive 1x peak (the angle the rotor turns after the mark). Missed, doubled '
         'and irregular marks are repaired, dropped or left as gaps, and said.',

@@ -1,7 +1,7 @@
 """
 The influence-coefficient record: a :class:`Calibration` as a mapping and back.
 
-The record (YAML or JSON; README "Field balancing") holds what a later correction needs
+The record (YAML or JSON; the docs' "Coefficient file") holds what a later correction needs
 (planes, sensors, the coefficients per sensor and plane as amplitude and phase, their 95 %
 radii, the speed and units) and what a reader needs to trust it (the runs it came from,
 each trial's visibility, the warnings). No file I/O: the command line reads and writes

@@ -1,7 +1,7 @@
 """
 The field-balancing report a service engineer reads: one HTML page and its PNG figures.
 
-Renders the correction summary (:mod:`cvc_balance.cli.field`'s JSON, README "Field
+Renders the correction summary (:mod:`cvc_balance.cli.field`'s JSON, the docs' "Field
 balancing"); matplotlib draws the figures. Public API: :func:`write_report`.
 """
 

@@ -2,7 +2,7 @@
 The field-balancing report's figures (PNG, matplotlib without pyplot's global state).
 
 Each function takes the correction summary (:func:`cvc_balance.cli.field.summarise`'s
-JSON-able data: README "Field balancing") and writes one PNG. Unbalance in g mm, angles
+JSON-able data: the docs' "JSON outputs") and writes one PNG. Unbalance in g mm, angles
 in the rotor frame (from rotor X toward rotor Y, counter-clockwise in the plot), masses g.
 """
 

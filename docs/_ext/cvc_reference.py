@@ -2,13 +2,18 @@
 Sphinx extension: write the reference pages from the code they describe.
 
 At ``builder-inited`` it writes ``reference/commands.md`` (every ``cvc-balance`` command and
-option, from the argparse parsers) and ``reference/node.md`` (every topic and parameter of
-the ``balance_monitor`` node, from its ``TOPICS`` and ``PARAMETERS`` declarations). Nothing
-in them is typed by hand, so the reference cannot drift from the code.
+option, from the argparse parsers), ``reference/node.md`` (every topic and parameter of
+the ``balance_monitor`` node, from its ``TOPICS`` and ``PARAMETERS`` declarations) and
+``reference/modules.md`` (every package, its layer as test/test_architecture.py enforces
+it, and every module with the first paragraph of its docstring). Nothing in them is typed
+by hand, so the reference cannot drift from the code.
 """
 
 import argparse
+import ast
 from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _escape(text):
@@ -81,14 +86,80 @@ def node_page():
     return '\n'.join(lines) + '\n'
 
 
-def write_pages(app):
-    """Write the generated pages into the source folder (ignored by git)."""
-    folder = Path(app.srcdir) / 'reference'
+def _layers():
+    """Return {package: (layer, what)} from test/test_architecture.py's LAYERS and comments."""
+    source = (ROOT / 'test' / 'test_architecture.py').read_text(encoding='utf-8')
+    tree = ast.parse(source)
+    lines = source.splitlines()
+    layers = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and [getattr(t, 'id', None) for t in node.targets] \
+                == ['LAYERS']:
+            for key, value in zip(node.value.keys, node.value.values):
+                comment = lines[key.lineno - 1].partition('#')[2].strip()
+                layers[key.value] = (value.value, comment)
+    return layers
+
+
+def _first_paragraph(path):
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding='utf-8'))) or ''
+    return ' '.join(doc.strip().split('\n\n')[0].split())
+
+
+def modules_page():
+    """Return the Markdown of the package's layers and modules, from the code."""
+    package = ROOT / 'cvc_balance'
+    layers = _layers()
+    lines = ['# Modules', '',
+             '`cvc_balance/` is one subpackage per concern, each a layer that imports only '
+             'the layers below it: `test/test_architecture.py` reads every import (those '
+             'inside functions too) and fails on an upward, sideways or circular one. This '
+             'page is written at build time from that test\'s table of layers and from each '
+             'module\'s own docstring. Each package\'s `__init__.py` names its public API '
+             '(`from cvc_balance.physics import RotorModel, loads`).', '']
+    folders = sorted((p for p in package.iterdir() if (p / '__init__.py').exists()),
+                     key=lambda p: (layers.get(p.name, (99, ''))[0], p.name))
+    for folder in folders:
+        layer, what = layers.get(folder.name, ('?', ''))
+        lines += [f'## `{folder.name}/` (layer {layer})', '', what + ('.' if what else ''),
+                  '', '| module | what it is |', '|---|---|']
+        for module in sorted(folder.glob('*.py')):
+            lines.append(f'| `{module.stem}` | {_escape(_first_paragraph(module))} |')
+        lines.append('')
+    return '\n'.join(lines)
+
+
+def tests_page():
+    """Return the Markdown of every test file, its test functions and what it checks."""
+    lines = ['# Test catalogue', '',
+             'Every file of `test/`, written at build time from the files themselves: the '
+             'number of test functions in it (parametrised ones run more cases) and the first '
+             'paragraph of its docstring. What the tests compare against, by subject: '
+             '[the tests](../validation/tests.md). Run one file with `./dev.sh run python -m '
+             'pytest test/FILE -q`; all of them with `./dev.sh test`.', '',
+             '| file | tests | what it checks |', '|---|---|---|']
+    for path in sorted((ROOT / 'test').glob('test_*.py')):
+        tree = ast.parse(path.read_text(encoding='utf-8'))
+        count = sum(isinstance(node, ast.FunctionDef) and node.name.startswith('test_')
+                    for node in ast.walk(tree))
+        lines.append(f'| `{path.name}` | {count} | {_escape(_first_paragraph(path))} |')
+    return '\n'.join(lines) + '\n'
+
+
+def write_generated(srcdir, pages):
+    """Write {name: Markdown} into ``srcdir``/reference (ignored by git), where it changed."""
+    folder = Path(srcdir) / 'reference'
     folder.mkdir(exist_ok=True)
-    for name, text in (('commands.md', commands_page()), ('node.md', node_page())):
+    for name, text in pages.items():
         path = folder / name
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
+
+
+def write_pages(app):
+    """Write the generated pages into the source folder (ignored by git)."""
+    write_generated(app.srcdir, {'commands.md': commands_page(), 'node.md': node_page(),
+                                 'modules.md': modules_page(), 'tests.md': tests_page()})
 
 
 def setup(app):
