@@ -1108,7 +1108,7 @@ def test_replay_accounts_for_every_input_and_says_why(tmp_path, monkeypatch):
         replay(no_layout)
     assert str(error.value) == (f'{no_layout}: no usable layout in the bag '
                                 '(topic layout, std_msgs/msg/String); name its topic with '
-                                '--layout or give a layout file with --layout-file')
+                                '--layout-topic or give a layout file with --layout-file')
     (tmp_path / 'layout.yaml').write_text(yaml.safe_dump(LAYOUT))
     # Joint states that never name the rotor's joint: refused whole, with the names they carry.
     for layout_file in (None, tmp_path / 'layout.yaml'):

@@ -85,7 +85,7 @@ def test_readings_by_hand_with_stored_coefficients_equal_influence(capsys, tmp_p
         assert b['mass'] == a['mass'] and b['radius'] == 0.68      # the trials' radius
     # With the layout: its sites and kit, the grade from the readings through them.
     code, out, err = run(capsys, 'correct', '--coefficients', record, '--readings',
-                         *readings['baseline'], '--layout', FIELD_LAYOUT, '--json')
+                         *readings['baseline'], '--layout-file', FIELD_LAYOUT, '--json')
     summary = json.loads(out)
     assert [p['name'] for p in summary['plans']] == ['continuous', 'split', 'optimal']
     assert summary['grade']['source'] == 'the readings through the coefficients'
@@ -97,7 +97,7 @@ def test_readings_by_hand_with_stored_coefficients_equal_influence(capsys, tmp_p
     assert code == 2 and 'the coefficients name 4 sensors' in err and 'got 1 readings' in err
     # The same report as from a run, with the readings' source said.
     code, out, err = run(capsys, 'report', '--coefficients', record, '--readings',
-                         *readings['baseline'], '--layout', FIELD_LAYOUT, '-o',
+                         *readings['baseline'], '--layout-file', FIELD_LAYOUT, '-o',
                          tmp_path / 'report', '--json')
     assert code == 0, err
     page = (tmp_path / 'report' / 'report.html').read_text()
@@ -321,7 +321,7 @@ def test_holes_in_the_plans_and_refused_numberings(capsys, tmp_path):
     layout['balancing']['sites']['II'].update(first_hole_angle_deg=90, numbering='with_rotation')
     path = tmp_path / 'holes.yaml'
     path.write_text(yaml.safe_dump(layout))
-    code, out, err = run(capsys, 'correct', BUNDLED[0], '--layout', path, '--weights-on',
+    code, out, err = run(capsys, 'correct', BUNDLED[0], '--layout-file', path, '--weights-on',
                          'II:#14:0.05', '--json')
     summary = json.loads(out)
     assert summary['weights_on'][0]['angle_deg'] == 285.0          # 90 + 13 x 15

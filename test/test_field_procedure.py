@@ -233,7 +233,7 @@ def test_a_site_radius_too_small_for_any_correction_is_refused(capsys, tmp_path)
     layout['balancing']['sites']['I']['radius'] = 1e-6
     path = tmp_path / 'tiny.yaml'
     path.write_text(yaml.safe_dump(layout))
-    code, out, err = run(capsys, 'correct', BUNDLED[0], '--layout', path)
+    code, out, err = run(capsys, 'correct', BUNDLED[0], '--layout-file', path)
     assert code == 2 and out == ''
     assert re.fullmatch(r'cvc-balance: error: plane I: the correction needs 1\.17e\+05 kg at r '
                         r'1e-06 m \(balancing\.sites\.I\.radius\), more than the whole rotor\'s '

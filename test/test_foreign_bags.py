@@ -436,7 +436,7 @@ def test_namespaced_topics_and_the_topic_options(reference, tmp_path):
     # The command line: options, and bad topics named with what the bag has.
     cli = [sys.executable, '-m', 'cvc_balance.cli']
     ok = subprocess.run(cli + ['replay', str(two), '--joint-states', '/gantry/joint_states',
-                               '--layout', '/gantry/layout'], capture_output=True, text=True)
+                               '--layout-topic', '/gantry/layout'], capture_output=True, text=True)
     assert ok.returncode == 0 and f'{len(run.stamps)} used' in ok.stdout, ok.stderr
     for args, words in (
             (['--joint-states', '/nowhere'], 'no topic /nowhere (given with --joint-states); '
@@ -444,7 +444,7 @@ def test_namespaced_topics_and_the_topic_options(reference, tmp_path):
              '(std_msgs/msg/String), /table/joint_states'),
             (['--joint-states', '/gantry/layout'], 'topic /gantry/layout has type '
              'std_msgs/msg/String, expected sensor_msgs/msg/JointState'),
-            (['--layout', 'config/ct_gantry.yaml'], 'not a topic name: '
+            (['--layout-topic', 'config/ct_gantry.yaml'], 'not a topic name: '
              "'config/ct_gantry.yaml' (a layout file goes with --layout-file FILE)")):
         for command in ('replay', 'view'):
             extra = ['-o', str(tmp_path / 'v.rrd')] if command == 'view' else []
@@ -452,7 +452,7 @@ def test_namespaced_topics_and_the_topic_options(reference, tmp_path):
                                  text=True)
             assert bad.returncode == 2 and words in bad.stderr, (command, bad.stderr)
             assert 'Traceback' not in bad.stderr
-    speed_only = subprocess.run(cli + ['replay', str(two), '--speed', '/gantry/speed'],
+    speed_only = subprocess.run(cli + ['replay', str(two), '--speed-topic', '/gantry/speed'],
                                 capture_output=True, text=True)
     assert speed_only.returncode == 2 and 'no topic /gantry/speed' in speed_only.stderr
 

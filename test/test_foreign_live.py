@@ -36,7 +36,7 @@ def test_play_a_split_namespaced_directory_through_the_node(tmp_path):
                        tmp_path / 'node.log')
     live = tmp_path / 'live'                      # recorded as a rosbag2 directory
     played = subprocess.run(CLI + ['play', str(bag), '--joint-states', '/gantry/joint_states',
-                                   '--layout', '/gantry/layout', '-o', str(live)],
+                                   '--layout-topic', '/gantry/layout', '-o', str(live)],
                             env=ros_environment(), capture_output=True, text=True, timeout=120)
     assert played.returncode == 0, played.stderr
     assert node.stop(signal.SIGINT) == 0

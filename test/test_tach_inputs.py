@@ -214,8 +214,8 @@ def test_a_named_tach_is_the_motion_and_bad_names_are_one_line(runs, tmp_path):
             (['--keyphasor', 'layout'], 'keyphasor topic /layout has type '
              'std_msgs/msg/String, expected std_msgs/msg/Float64 (a sampled tach) or '
              'sensor_msgs/msg/TimeReference'),
-            (['--keyphasor', 'keyphasor', '--speed', 'speed'], '--keyphasor is the motion: '
-             'give it without --joint-states or --speed'),
+            (['--keyphasor', 'keyphasor', '--speed-topic', 'speed'], '--keyphasor is the motion: '
+             'give it without --joint-states or --speed-topic'),
             (['--keyphasor-threshold', '7'], 'keyphasor /keyphasor gives 0 marks')):
         code, out, err = run_cli('replay', sampled, *args)
         assert code == 2 and out == '', (args, err)

@@ -682,7 +682,7 @@ def _checked(calibration, record, layout, speed, accept_mismatch, warnings):
     calibration, note = at_speed(calibration, record, speed)
     if note:
         warnings.append(note)
-    check = ModelCheck(False, 'no layout (give --layout): the coefficients are not checked '
+    check = ModelCheck(False, 'no layout (give --layout-file): the coefficients are not checked '
                        'against physics')
     if layout is not None and speed:
         check = check_coefficients(layout, calibration, speed, record_trials(record),

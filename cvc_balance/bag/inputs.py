@@ -3,8 +3,8 @@ Which topics of a bag are the node's inputs: the motion and the layout.
 
 By default the node's own (relative) names, found at the root or under one
 namespace (``/gantry/joint_states``) if exactly one topic has that name; the
-user names others (remapped topics) with ``--joint-states``, ``--speed``,
-``--keyphasor`` and ``--layout``, matched exactly. The motion comes from the
+user names others (remapped topics) with ``--joint-states``, ``--speed-topic``,
+``--keyphasor`` and ``--layout-topic``, matched exactly. The motion comes from the
 one named, else from joint_states, else speed, else a keyphasor topic
 ``keyphasor`` (a once-per-revolution tach: :mod:`cvc_balance.bag.channels`).
 Used by replay, identify, view and play.
@@ -16,7 +16,7 @@ from cvc_balance.bag.channels import keyphasor_channel
 from cvc_balance.bag.mcap_reader import BagError, describe_topics
 from cvc_balance.messages import topics
 
-OPTIONS = {'joint_states': '--joint-states', 'speed': '--speed', 'layout': '--layout',
+OPTIONS = {'joint_states': '--joint-states', 'speed': '--speed-topic', 'layout': '--layout-topic',
            'keyphasor': '--keyphasor'}
 """The command-line option that names each input topic."""
 
@@ -58,7 +58,7 @@ def input_channels(bag, names=None):
     Return the :class:`InputChannels` of ``bag`` for ``names`` (:class:`InputTopics`).
 
     A keyphasor named is used (and nothing else for the motion); else joint_states
-    unless only --speed was given; else speed; else a keyphasor topic ``keyphasor``.
+    unless only --speed-topic was given; else speed; else a keyphasor topic ``keyphasor``.
     Raises :class:`BagError` naming the bag's topics and types when a named topic is
     missing or has another type, or when the bag has no motion topic.
     """
@@ -67,7 +67,7 @@ def input_channels(bag, names=None):
     if names.keyphasor is not None:
         if names.joint_states is not None or names.speed is not None:
             raise BagError(f'{bag.path}: --keyphasor is the motion: give it without '
-                           '--joint-states or --speed')
+                           '--joint-states or --speed-topic')
         found.keyphasor = keyphasor_channel(bag, names.keyphasor)
     else:
         use_joints = names.joint_states is not None or names.speed is None
@@ -83,7 +83,7 @@ def input_channels(bag, names=None):
                        f'{topics.SPEED} ({topics.FLOAT64_TYPE}) or {topics.KEYPHASOR} '
                        f'({topics.FLOAT64_TYPE} or {topics.TIME_REFERENCE_TYPE}) topic; the '
                        f'bag has: {describe_topics(bag.channels.values())} (name the topic '
-                       'with --joint-states, --speed or --keyphasor)')
+                       'with --joint-states, --speed-topic or --keyphasor)')
     found.layout = _channel(bag, names.layout, 'layout', topics.STRING_TYPE)
     return found
 

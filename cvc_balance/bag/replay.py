@@ -176,7 +176,8 @@ def layouts_in_force(bag, layout_messages, layout_file=None):
                             'said above)')
     if not events:
         raise BagError(f'{bag.path}: no usable layout in the bag (topic layout, {STRING}); '
-                       'name its topic with --layout or give a layout file with --layout-file')
+                       'name its topic with --layout-topic or give a layout file with '
+                       '--layout-file')
     return events, problems
 
 

@@ -9,11 +9,14 @@ on stderr naming what is wrong).
 
 import argparse
 import importlib
+import os
 import sys
 
 from cvc_balance.cli.arguments import EXIT_BAD_INPUT, EXIT_FAILURE
 from cvc_balance.physics.layout import LayoutError, one_line
 
+EXIT_BROKEN_PIPE = 141
+"""Exit code when the reader of stdout went away (128 + SIGPIPE, as the shell reports it)."""
 COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'field', 'readings',
                    'fleet', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
@@ -24,6 +27,11 @@ def main(argv=None):
     args = parser().parse_args(argv)
     try:
         return args.run(args)
+    except BrokenPipeError:
+        # The reader went away (`cvc-balance ... | head`): stop quietly, as a POSIX tool
+        # killed by SIGPIPE does; stdout goes to /dev/null so the exit flush cannot fail.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except (LayoutError, ValueError, OSError) as error:
         print(f'cvc-balance: error: {one_line(error, 2000)}', file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -87,21 +87,50 @@ OUTPUT_BAG_HELP = ('bag to write: a .mcap file, or any other name for a rosbag2 
                    '(as ros2 bag record -o)')
 
 
+class Renamed(argparse.Action):
+    """An old spelling of an option: refused with the new name (one vocabulary everywhere)."""
+
+    def __init__(self, option_strings, dest, instead, **kwargs):
+        """``instead``: what to give now, e.g. '--layout-topic TOPIC or --layout-file FILE'."""
+        super().__init__(option_strings, dest, nargs='?', help=argparse.SUPPRESS, **kwargs)
+        self.instead = instead
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        """Refuse, naming the option to give instead."""
+        parser.error(f'{option_string} is no longer an option here: give {self.instead}')
+
+
+def renamed(parser, option, instead):
+    """Refuse ``option`` (its old spelling) on ``parser``, naming what to give ``instead``."""
+    parser.add_argument(option, action=Renamed, instead=instead,
+                        dest=f'renamed_{option.strip("-").replace("-", "_")}')
+
+
 def add_input_topics(parser):
-    """Add the bag's input topics, if not the node's: motion (an encoder or a tach), layout."""
+    """
+    Add the bag's input topics, if not the node's: motion (an encoder or a tach), layout.
+
+    One vocabulary across the commands: a topic is ``--NAME-topic TOPIC`` (``--layout-topic``,
+    ``--speed-topic``), a file ``--layout-file FILE``, a speed ``--speed W`` in rad/s; the
+    old ``--layout TOPIC`` and ``--speed TOPIC`` are refused naming the new spelling.
+    """
     parser.add_argument('--joint-states', type=topic_name, metavar='TOPIC',
                         help='JointState topic of the rotor (default: joint_states, also '
                         'under a namespace)')
-    parser.add_argument('--speed', type=topic_name, metavar='TOPIC',
-                        help='Float64 speed topic, used when there is no JointState (default: '
-                        'speed); alone, it is used instead of joint_states')
+    parser.add_argument('--speed-topic', type=topic_name, metavar='TOPIC',
+                        help='Float64 speed topic (rad/s), used when there is no JointState '
+                        '(default: speed); alone, it is used instead of joint_states')
     add_keyphasor(parser, 'a once-per-revolution tach instead of an encoder: the rotor '
                   'angle is 0 at each of its marks and interpolated between them, the speed '
                   'the mean over 8 revolutions; missed and doubled marks are repaired or '
                   'dropped and said (default: keyphasor, when the bag has neither '
                   'joint_states nor speed)')
-    parser.add_argument('--layout', type=topic_name, metavar='TOPIC',
+    parser.add_argument('--layout-topic', type=topic_name, metavar='TOPIC',
                         help='String layout topic (default: layout)')
+    renamed(parser, '--layout', '--layout-topic TOPIC (the bag\'s layout topic) or '
+            '--layout-file FILE (a layout file)')
+    renamed(parser, '--speed', '--speed-topic TOPIC (the bag\'s speed topic; --speed W is '
+            'a speed in rad/s where a command takes one)')
 
 
 def add_keyphasor(parser, what):
@@ -121,7 +150,7 @@ def add_keyphasor(parser, what):
 def input_topics(args):
     """Return the :class:`cvc_balance.bag.inputs.InputTopics` the options name."""
     from cvc_balance.bag.inputs import InputTopics
-    return InputTopics(args.joint_states, args.speed, args.layout, args.keyphasor,
+    return InputTopics(args.joint_states, args.speed_topic, args.layout_topic, args.keyphasor,
                        args.keyphasor_edge, args.keyphasor_threshold)
 
 

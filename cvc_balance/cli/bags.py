@@ -70,6 +70,9 @@ def register(commands):
     add_bounded(view, '--every', limit=limits.EVERY, default=10, metavar='N',
                 help='draw load arrows for every N-th sample (plots get all)')
     view.add_argument('--joint-name', default='gantry_joint')
+    view.add_argument('--layout-file', type=input_file, metavar='FILE',
+                      help="use this layout for the whole run instead of the bag's (a bag "
+                      'recorded without a layout)')
     add_input_topics(view)
     view.add_argument('--screenshot', metavar='PNG', help='also render the viewer headless '
                       '(needs a Vulkan adapter, e.g. Mesa lavapipe) and save a picture')
@@ -220,11 +223,12 @@ def _rerun_logger(path, bag, every=10, identified=None):
 
 def _view(args):
     from cvc_balance.bag.replay import replay
-    with staged_outputs([args.bag], rrd=args.output, png=args.screenshot) as out:
+    with staged_outputs([args.bag, args.layout_file], rrd=args.output,
+                        png=args.screenshot) as out:
         identified = _identified(args)
         logger = _rerun_logger(out['rrd'], args.bag, args.every, identified)
-        summary = replay(args.bag, joint_name=args.joint_name, observer=logger,
-                         names=input_topics(args))
+        summary = replay(args.bag, layout_file=args.layout_file, joint_name=args.joint_name,
+                         observer=logger, names=input_topics(args))
         _log_cells(logger, identified)
         logger.finish()
         print(f'{args.output}: {summary.accepted} samples of {args.bag}, '

@@ -15,7 +15,7 @@ from pathlib import Path
 import sys
 
 from cvc_balance.cli.arguments import (count, input_bag, input_file, positive, print_json,
-                                       within)
+                                       renamed, within)
 from cvc_balance.files import check_output, moved_into_when_done, replaced_when_done
 from cvc_balance.physics import limits
 from cvc_balance.physics.frames import degrees
@@ -145,9 +145,10 @@ def register(commands):
                              help="the run's (or readings') steady speed, rad/s (default: the "
                              "coefficients'; load cells' coefficients are scaled as the speed "
                              'squared)')
-        command.add_argument('--layout', '--layout-file', type=input_file, metavar='FILE',
+        command.add_argument('--layout-file', type=input_file, metavar='FILE',
                              dest='layout',
                              help="layout with balancing.sites (default: the bag's)")
+        renamed(command, '--layout', '--layout-file FILE')
         command.add_argument('--objective', choices=('fewest', 'residual'),
                              help='fewest weights within the grade (default with a grade '
                              'or --limit), or the smallest residual')

@@ -11,7 +11,7 @@ from cvc_balance.cli.arguments import add_bounded, input_file, print_json, toler
 from cvc_balance.physics import limits
 from cvc_balance.physics.assessment import judge_balance, verdict_record
 from cvc_balance.physics.engine import RotorModel, sample_loads
-from cvc_balance.physics.frames import degrees, g_mm, g_mm2, radians, ROTOR_FRAME, STATOR_FRAME
+from cvc_balance.physics.frames import degrees_360, g_mm, g_mm2, radians, ROTOR_FRAME, STATOR_FRAME
 from cvc_balance.physics.layout_file import load_layout
 from cvc_balance.physics.model_choice import choose_model, Envelope, Tolerance
 from cvc_balance.physics.plausibility import layout_warnings
@@ -87,7 +87,7 @@ def solve_summary(model, result, verdict, omega, alpha, q, gravity):
         'layout': {'name': layout.name, 'digest': layout.digest(),
                    'components': len(layout.components)},
         'frames': {'stator': STATOR_FRAME, 'rotor': ROTOR_FRAME},
-        'sample': {'omega': omega, 'alpha': alpha, 'angle_deg': degrees(q),
+        'sample': {'omega': omega, 'alpha': alpha, 'angle_deg': degrees_360(q),
                    'gravity': list(gravity)},
         'mass': model.mass,
         'com': [model.s_x / model.mass, model.s_y / model.mass, model.s_z / model.mass],
@@ -101,9 +101,9 @@ def solve_summary(model, result, verdict, omega, alpha, q, gravity):
                      'moment': list(result.supports[s.name][1])}
             for s in model.supports},
         'static_unbalance': {'kg_m': math.hypot(*static),
-                             'angle_deg': degrees(math.atan2(static[1], static[0]))},
+                             'angle_deg': degrees_360(math.atan2(static[1], static[0]))},
         'couple_unbalance': {'kg_m2': math.hypot(*couple),
-                             'angle_deg': degrees(math.atan2(couple[1], couple[0]))},
+                             'angle_deg': degrees_360(math.atan2(couple[1], couple[0]))},
         'balance': verdict_record(verdict),
     }
     return summary

@@ -66,7 +66,8 @@ def calibration_mapping(calibration, reading_units, correction_unit, speed=None,
     checks = []
     for check, trial in zip(calibration.checks, trials):
         checks.append({'run': check.run + 1, 'plane': trial.plane, 'mass': float(trial.mass),
-                       'angle_deg': math.degrees(trial.angle), 'radius': float(trial.radius),
+                       'angle_deg': math.degrees(trial.angle) % 360.0,
+                       'radius': float(trial.radius),
                        'largest_change': float(check.change),
                        'snr': None if check.snr is None else float(check.snr),
                        'relative_change': float(check.relative),

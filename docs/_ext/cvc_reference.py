@@ -24,7 +24,8 @@ def _escape(text):
 def _option_rows(parser):
     rows = []
     for action in parser._actions:
-        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
+        if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)) or \
+                action.help == argparse.SUPPRESS:     # an old spelling, refused
             continue
         if action.option_strings:
             name = ', '.join(f'`{o}`' for o in action.option_strings)
