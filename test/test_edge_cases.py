@@ -1125,10 +1125,11 @@ def test_replay_accounts_for_every_input_and_says_why(tmp_path, monkeypatch):
         writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
     with pytest.raises(BagError) as error:
         replay(layout_only)
-    assert str(error.value).endswith('no joint_states (sensor_msgs/msg/JointState) or speed '
-                                     '(std_msgs/msg/Float64) topic; the bag has: /layout '
+    assert str(error.value).endswith('no joint_states (sensor_msgs/msg/JointState), speed '
+                                     '(std_msgs/msg/Float64) or keyphasor (std_msgs/msg/Float64 '
+                                     'or sensor_msgs/msg/TimeReference) topic; the bag has: /layout '
                                      '(std_msgs/msg/String) (name the topic with '
-                                     '--joint-states or --speed)')
+                                     '--joint-states, --speed-topic or --keyphasor)')
     with BagWriter(tmp_path / 'empty.mcap'):
         pass
     with pytest.raises(BagError, match=r'topic; the bag has: none \(name the topic with'):
