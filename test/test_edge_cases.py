@@ -1127,8 +1127,8 @@ def test_replay_accounts_for_every_input_and_says_why(tmp_path, monkeypatch):
         replay(layout_only)
     assert str(error.value).endswith('no joint_states (sensor_msgs/msg/JointState), speed '
                                      '(std_msgs/msg/Float64) or keyphasor (std_msgs/msg/Float64 '
-                                     'or sensor_msgs/msg/TimeReference) topic; the bag has: /layout '
-                                     '(std_msgs/msg/String) (name the topic with '
+                                     'or sensor_msgs/msg/TimeReference) topic; the bag has: '
+                                     '/layout (std_msgs/msg/String) (name the topic with '
                                      '--joint-states, --speed-topic or --keyphasor)')
     with BagWriter(tmp_path / 'empty.mcap'):
         pass
