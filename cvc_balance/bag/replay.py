@@ -7,6 +7,7 @@ the same outputs and frames. No ROS graph is needed.
 """
 
 from dataclasses import dataclass, field
+from functools import partial
 import time
 
 import numpy as np
@@ -291,8 +292,10 @@ class OutputBlocks:
         stamps = ((sec & 0xFFFFFFFF) | (nanosec << 32)).astype(np.uint64)
         for a in range(0, len(stamp), block.n):
             b = min(a + block.n, len(stamp))
-            self._fill(block.buffer(), wrenches, result.drive_torque, stamps, omega, a, b)
-            self.writer.write_block(block, log_time[a:b], b - a)
+            # Filled on the writer's threads, several chunks at once.
+            self.writer.write_block(block, log_time[a:b], b - a, partial(
+                self._fill, wrenches=wrenches, drive_torque=result.drive_torque,
+                stamps=stamps, omega=omega, a=a, b=b))
 
     def _fill(self, buffer, wrenches, drive_torque, stamps, omega, a, b):
         n, names = b - a, self.names
