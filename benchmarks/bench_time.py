@@ -6,8 +6,8 @@ chart), the quick run ``--quick-runs`` times and the full run (``--full``) ``--f
 times, into a scratch folder (docs/ is not touched), and prints each one's wall time, the
 median and spread, and the load average beside it. Then checks each quick run's conclusions
 against each full run's (:func:`cvc_balance.study.bench.compare`: the methods run, the
-Pareto fronts, the fastest and most accurate method of each scene, the order of every two
-methods the full run sets 2x apart in time or 10x in error) and prints what differs.
+Pareto fronts to the timing noise, the order of every two methods the full run sets 2x
+apart in time or 10x in error) and prints what differs.
 ``--before PATH``: also time the full run of the code in PATH (a checkout of the project
 before the quick run existed: ``git worktree add --detach /tmp/before <commit>``), run with
 this environment, PYTHONPATH=PATH: the baseline.

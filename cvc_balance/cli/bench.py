@@ -44,7 +44,6 @@ def run(args):
                 print(f'  {line}')
         else:
             print(f'conclusions those of the full run ({args.compare}): the methods run, '
-                  'the Pareto fronts, the fastest and the most accurate method of each scene, '
-                  f'and the order of every two methods it sets {SPEED_GAP:g}x apart in time '
-                  f'or {ACCURACY_GAP:g}x in error')
+                  'the Pareto fronts (to the timing noise), and the order of every two '
+                  f'methods it sets {SPEED_GAP:g}x apart in time or {ACCURACY_GAP:g}x in error')
     return 0
