@@ -25,6 +25,10 @@ def main():
     parser.add_argument('--machines', type=int, default=20)
     parser.add_argument('--runs', type=int, default=10)
     parser.add_argument('--rate', type=float, default=100.0, help='encoder samples/s')
+    parser.add_argument('--cell-rate', type=float, help='load-cell readings/s (default --rate)')
+    parser.add_argument('--steady', type=float, default=3.0,
+                        help='seconds of each run at the service speed (596: 10-minute runs)')
+    parser.add_argument('--keep', metavar='DIR', help='simulate into DIR, or reuse its fleet')
     parser.add_argument('--repeat', type=int, default=2, help='best of this many')
     args = parser.parse_args()
 

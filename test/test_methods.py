@@ -278,8 +278,8 @@ def test_quick_bench_runs_costly_methods_on_fewer_samples_and_keeps_the_accuracy
     assert {r['scene'] for r in rows[True]} == set(chosen) and len(rows[True]) == 22
     for quick, full in zip(rows[False], rows[True]):
         assert (quick['scene'], quick['method']) == (full['scene'], full['method'])
-        bodies = len(layouts[full['scene']]) * {'particles_1000': 1000,
-                                                 'particles_10000': 10_000}.get(full['method'], 1)
+        per_body = {'particles_1000': 1000, 'particles_10000': 10_000}.get(full['method'], 1)
+        bodies = len(layouts[full['scene']]) * per_body
         assert full['samples'] == min(512, int(3e7 // bodies))
         assert quick['samples'] == min(full['samples'], max(32, int(3e7 / 8 // bodies)))
         assert quick['samples'] < full['samples'] or bodies < 12_000
@@ -297,9 +297,9 @@ def test_stored_references_are_the_scenes():
     The quick bench's stored 40-digit references: the scenes' layouts, computed again.
 
     Each of the six scenes' layouts has its entry (by digest; spin-up's is axial offsets');
-    the small ones equal basis_wrenches computed now, digit for digit. The 10^5-component scene's (1.5 minutes
-    to compute; the full bench does) is checked against the engine's double-double
-    aggregates: mass, static unbalance and couple about O to 1e-15.
+    the small ones equal basis_wrenches computed now, digit for digit. The 10^5-component
+    scene's (1.5 minutes to compute; the full bench does) is checked against the engine's
+    double-double aggregates: mass, static unbalance and couple about O to 1e-15.
     """
     from cvc_balance.physics.engine import RotorModel
     from cvc_balance.study.bench import layout_digest, scenes, stored_references

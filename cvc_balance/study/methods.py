@@ -278,8 +278,8 @@ def _local_particles(kind, components, k):
         rr = np.broadcast_to(radius[:, :, None, None], shape)
         pp = np.broadcast_to(phi[None, None, :, None], shape)
         zz = np.broadcast_to(along[:, None, None, :], shape)
-        cyl = np.stack([rr * np.cos(pp), rr * np.sin(pp), zz], -1).reshape(len(components),
-                                                                            -1, 3)
+        cyl = np.stack([rr * np.cos(pp), rr * np.sin(pp), zz], -1)
+        cyl = cyl.reshape(len(components), -1, 3)
         order = {'axial': [0, 1, 2], 'radial': [2, 0, 1], 'tangential': [0, 2, 1]}
         local = cyl[:, :, order[axis]]
     return local, np.broadcast_to(mass / local.shape[1], local.shape[:2])
