@@ -371,7 +371,8 @@ def test_machine_id_in_bags_read_by_others(tmp_path):
     (['simulate-fleet', 'config/thesis_two_particles.yaml', '-o', 'x'], "no component"),
     (['simulate', 'bags/spin_up_tube_swap.yaml', '-o', 'x.mcap', '--machine-id', 'a b'],
      'machine id'),
-    (['simulate-fleet', 'config/ct_gantry.yaml', '-o', 'x', '--steady', '0'], '--steady: must be > 0'),
+    (['simulate-fleet', 'config/ct_gantry.yaml', '-o', 'x', '--steady', '0'],
+     '--steady: must be > 0'),
 ])
 def test_bad_input_one_line_exit_2(argv, says, tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
