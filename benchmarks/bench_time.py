@@ -4,10 +4,11 @@
 Runs the command as a user does (a fresh process: imports, scenes, references, methods,
 chart), the quick run ``--quick-runs`` times and the full run (``--full``) ``--full-runs``
 times, into a scratch folder (docs/ is not touched), and prints each one's wall time, the
-median and spread, and the load average beside it. Then checks each quick run's conclusions
-against each full run's (:func:`cvc_balance.study.bench.compare`: the methods run, the
-Pareto fronts to the timing noise, the order of every two methods the full run sets 2x
-apart in time or 10x in error) and prints what differs.
+median and spread, its CPU time (less sensitive to the load than the wall time), and the
+load average beside it. Then checks each quick run's conclusions against each full run's
+(:func:`cvc_balance.study.bench.compare`: the methods run, the Pareto fronts to the timing
+noise, the order of every two methods the full run sets 2x apart in time or 10x in error)
+and prints what differs.
 ``--before PATH``: also time the full run of the code in PATH (a checkout of the project
 before the quick run existed: ``git worktree add --detach /tmp/before <commit>``), run with
 this environment, PYTHONPATH=PATH: the baseline.
@@ -19,6 +20,7 @@ this environment, PYTHONPATH=PATH: the baseline.
 import argparse
 import os
 from pathlib import Path
+import resource
 import statistics
 import subprocess
 import sys
@@ -29,17 +31,21 @@ from cvc_balance.study.bench import compare, read_rows
 
 
 def timed_bench(folder, name, options=(), pythonpath=None):
-    """Run the bench into ``folder``; return (wall s, load before, CSV path)."""
+    """Run the bench into ``folder``; return (wall s, CPU s, load before, CSV path)."""
     csv_path, png_path = folder / f'{name}.csv', folder / f'{name}.png'
     environment = dict(os.environ)
     if pythonpath:
         environment['PYTHONPATH'] = str(pythonpath)
     load = os.getloadavg()[0]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     began = time.perf_counter()
     subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'bench', *options,
                     '--csv', str(csv_path), '--png', str(png_path)], check=True, env=environment,
                    cwd=folder, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - began, load, csv_path
+    seconds = time.perf_counter() - began
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return seconds, cpu, load, csv_path
 
 
 def main():
@@ -61,19 +67,20 @@ def main():
         runs += [('quick (default)', f'quick{k}', (), None) for k in range(args.quick_runs)]
         tables = {'full (--full)': [], 'quick (default)': []}
         for label, name, options, path in runs:
-            seconds, load, csv_path = timed_bench(folder, name, options, path)
-            timings.setdefault(label, []).append((seconds, load))
+            seconds, cpu, load, csv_path = timed_bench(folder, name, options, path)
+            timings.setdefault(label, []).append((seconds, cpu, load))
             if label in tables:
                 tables[label].append(read_rows(csv_path))
-            print(f'{label:42} {seconds:7.1f} s  (load average {load:.1f} at its start)',
-                  flush=True)
-        print(f"\n{'run':42} {'wall s: median':>15} {'spread':>16} {'runs':>5} "
+            print(f'{label:42} {seconds:7.1f} s, CPU {cpu:6.1f} s  (load average {load:.1f} '
+                  'at its start)', flush=True)
+        print(f"\n{'run':42} {'wall s: median':>15} {'spread':>16} {'CPU s':>7} {'runs':>5} "
               f"{'load':>10}")
         for label, values in timings.items():
-            seconds = [s for s, _ in values]
-            loads = [f'{load:.1f}' for _, load in values]
+            seconds = [s for s, _, _ in values]
+            loads = [f'{load:.1f}' for _, _, load in values]
             print(f'{label:42} {statistics.median(seconds):15.1f} '
-                  f'{min(seconds):7.1f} - {max(seconds):6.1f} {len(values):5} '
+                  f'{min(seconds):7.1f} - {max(seconds):6.1f} '
+                  f'{statistics.median(c for _, c, _ in values):7.1f} {len(values):5} '
                   f'{"/".join(loads):>10}')
         print()
         for i, quick in enumerate(tables['quick (default)']):

@@ -3,7 +3,7 @@
 
 For each scene (planar, axial offsets, tilt, spin-up, near-balance, 10^5 components)
 every method of :mod:`cvc_balance.study.methods` computes the loads over motion samples; its
-cost is the best wall time per sample of three runs, its error the largest relative
+cost is the best wall time per sample of three runs or more (:data:`TIMED`), its error the largest relative
 deviation from the 40-digit reference (:mod:`cvc_balance.study.exact`) over the samples (each
 output scaled by the reference's largest value of it). Writes a CSV and a log-log chart
 (error against time per sample, one mark per method per scene) and prints the table.
@@ -41,6 +41,12 @@ The quick run gives a method WORK_LIMIT / QUICK_SHARE body-samples, but at least
 QUICK_SAMPLES samples (or the full run's, if fewer): a time per sample over fewer samples
 counts the fixed costs of a call (per particle, per call) more, and would rank methods
 otherwise. Cheap methods keep every sample; only the costly ones run on fewer.
+"""
+TIMED = 0.05
+"""
+Seconds a method is run for at least (three runs at least): the best run of a cheap method
+(80 us) out of hundreds, as one whose caches another process emptied or that was
+descheduled is not its cost (best of three moved such a method 5x on this shared machine).
 """
 REFERENCES = Path(__file__).with_name('bench_references.json')
 """The scenes' 40-digit unit-motion wrenches, by layout digest (written by the full run)."""
@@ -160,10 +166,10 @@ def run(csv_path, png_path, seed=0, print_table=print, full=False, only=None,
     """
     Run every method on every scene; write the CSV and the chart; return the rows.
 
-    ``full``: every sample (and the references computed, and stored in ``references``
-    when they are not there yet); else the quick run (:data:`QUICK_SAMPLES`), the references
-    read from ``references`` (computed when missing). ``only``:
-    names of the scenes to run (default all); ``png_path`` None: no chart.
+    ``full``: the full run (the references computed, and stored in ``references`` when
+    they are not there yet); else the quick run (:data:`QUICK_SAMPLES`), the references
+    read from ``references`` (computed when missing). ``only``: names of the scenes to run
+    (default all); ``png_path`` None: no chart.
     """
     rng = np.random.default_rng(seed)
     rows = []
@@ -199,13 +205,13 @@ def run(csv_path, png_path, seed=0, print_table=print, full=False, only=None,
                                            int(WORK_LIMIT / QUICK_SHARE // bodies)))
             part = slice(0, samples)
             state = prepare(layout)
-            best = math.inf
-            spent = 0.0
-            for _ in range(3):
+            best, spent, runs = math.inf, 0.0, 0
+            while runs < 3 or spent < TIMED:
                 start = time.perf_counter()
                 result = compute(state, q[part], omega[part], alpha[part], gravity)
                 best = min(best, time.perf_counter() - start)
                 spent += time.perf_counter() - start
+                runs += 1
                 if not full and spent > 1.0:     # long enough to time once
                     break
             error = max(_relative(got, ref[part]) for got, ref in zip(result, reference))
@@ -229,7 +235,7 @@ def run(csv_path, png_path, seed=0, print_table=print, full=False, only=None,
 def run_title(full):
     """Return what the chart's title says of the run."""
     if full:
-        return 'full run: every sample'
+        return 'full run (cvc-balance bench --full): every sample, costly methods on fewer'
     return (f'quick run: costly methods on 1/{QUICK_SHARE} of the full run\'s work, at least '
             f'{QUICK_SAMPLES} samples (cvc-balance bench --full for the full run)')
 
