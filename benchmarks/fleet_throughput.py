@@ -9,8 +9,13 @@ is analysed four ways, each into a fresh results table: single-process replay
 (its start-up included: a user waits for it). Each is run ``--repeat`` times, interleaved,
 and printed as median and spread with the load average at its start. Overhead per bag =
 (fleet time - the single-process loop's) / bags; speed-up = the single-process loop's time
-/ the fleet's. ``--before PATH``: the fleet runs also with the code in PATH (a checkout
-before the change, in a fresh process with PYTHONPATH=PATH), the baseline. A scheduler
+/ the fleet's; CPU s/bag: of every process of the run (the client's, the workers'). Where
+sessions share the CPU fairly (Linux's autogroup, on the shared development machine: two
+CPU-bound processes of one session got 0.64 cores between them at load 5.6, one alone
+0.67), a session's processes together get its share under load, however many they are:
+there the speed-up of 2 workers shows only on idle cores, and CPU s/bag is the figure to
+compare. ``--before PATH``: the fleet runs also with the code in PATH (a checkout before
+the change, in a fresh process with PYTHONPATH=PATH), the baseline. A scheduler
 round trip: the mean of 200 submit-and-wait of a no-op task on a 2-worker cluster. Prints
 the figures; asserts nothing.
 
@@ -95,9 +100,10 @@ def main():
         for k in range(args.repeat):
             for label, engine, workers in ways:
                 load = os.getloadavg()[0]
+                used = _cpu()
                 if engine is None:
                     seconds = _timed(single)
-                    runs[label].append((seconds, load, None, 1))
+                    runs[label].append((seconds, load, None, 1, _cpu() - used))
                     continue
                 out = Path(scratch) / f'{label.replace(" ", "_")}_{k}.parquet'
                 if label.startswith('before'):
@@ -111,21 +117,22 @@ def main():
                               'analysis_seconds': done.analysis_seconds}
                 assert report['analysed'] == len(bags), report
                 runs[label].append((report['seconds'], load, report['analysis_seconds'],
-                                    report['batch']))
+                                    report['batch'], _cpu() - used))
         floor = statistics.median(s for s, *_ in runs[ways[0][0]])
         print(f"\n{'how':40}{'wall s: median':>15}{'spread':>16}{'bags/s':>8}"
               f"{'M samples/s':>12}{'overhead/bag':>14}{'speed-up':>9}"
-              f"{'analysis: bags/s':>17}{'batch':>6}  load")
+              f"{'analysis: bags/s':>17}{'batch':>6}{'CPU s/bag':>10}  load")
         for label, values in runs.items():
             seconds = statistics.median(s for s, *_ in values)
             overhead = (seconds - floor) / len(bags) * 1e3
-            analysis = [a for _, _, a, _ in values if a]
+            analysis = [a for _, _, a, _, _ in values if a]
             rate = f'{len(bags) / statistics.median(analysis):17.1f}' if analysis else ' ' * 17
-            loads = '/'.join(f'{load:.1f}' for _, load, _, _ in values)
+            loads = '/'.join(f'{load:.1f}' for _, load, _, _, _ in values)
+            cpu = statistics.median(c for *_, c in values) / len(bags)
             print(f'{label:40}{seconds:15.2f}{min(s for s, *_ in values):8.2f} -'
                   f'{max(s for s, *_ in values):6.2f}{len(bags) / seconds:8.1f}'
                   f'{samples / seconds / 1e6:12.3f}{overhead:12.1f}ms{floor / seconds:8.2f}x'
-                  f'{rate}{values[0][3]:6}  {loads}')
+                  f'{rate}{values[0][3]:6}{cpu:10.3f}  {loads}')
         _round_trip()
         print(f'load average at the end {os.getloadavg()[0]:.1f} (the machine is shared: '
               'see the load beside each figure)')
@@ -155,6 +162,13 @@ def _round_trip():
     cluster.close()
     print(f'LocalCluster (2 worker processes) start {started:.2f} s; scheduler round trip '
           f'(submit a no-op, wait for its result) {trip * 1e3:.2f} ms')
+
+
+def _cpu():
+    """CPU seconds of this process and of its children that ended (workers, --before runs)."""
+    import resource
+    return sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 def _timed(function):
