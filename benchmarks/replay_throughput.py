@@ -19,11 +19,26 @@ chunks of 1 MiB, Schema and Channel records inside the chunks, summary), and a r
 directory split in three MCAP files (each written by rosbags' rosbag2 Writer, gathered with a
 metadata.yaml as ``ros2 bag record --max-bag-duration`` leaves them).
 
+``--tune``: how the output's zstd level and chunk size were chosen. First the compressor
+alone on a replay's own chunks (its uncompressed output, re-cut): per level and chunk size,
+GB/s of one thread (CPU time, best of 3: the machine's load counts little) and the ratio,
+and zstd's own threads on a chunk (wall time); then whole replays with zstd output at each
+chunk size and level, ``--repeat`` times interleaved, against replay without output: wall
+time (median and spread), CPU time of the process, output size, load average; with
+``--before PATH``, also the replay of the code in PATH (a checkout before the change, run in
+a fresh process with this environment: its wall and CPU time measured around its second
+replay call, as the others' are, repeats), the baseline.
+
 Run: ./dev.sh run python benchmarks/replay_throughput.py [--samples 1000000] [--foreign-only]
+     [--tune [--repeat 5] [--before /tmp/before]]
 """
 
 import argparse
+import importlib
+import os
 from pathlib import Path
+import resource
+import statistics
 import tempfile
 import time
 
@@ -129,16 +144,146 @@ def time_rosbags(bag, samples, what):
     return seconds
 
 
+def replay_chunks(bag, folder, limit=128 << 20):
+    """Return the records of a replay's uncompressed output chunks, joined (at most ``limit``)."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    out = folder / 'tune_uncompressed.mcap'
+    replay(bag, out, compression='')
+    parts, size = [], 0
+    with open(out, 'rb') as stream:
+        for record in StreamReader(stream, emit_chunks=True).records:
+            if isinstance(record, Chunk) and size < limit:
+                parts.append(record.data)
+                size += len(record.data)
+    out.unlink()
+    return b''.join(parts)[:limit]
+
+
+def compression_table(data):
+    """Print GB/s (one thread, CPU time) and ratio per zstd level and chunk size."""
+    import zstandard
+    print(f'zstd on {len(data) / 1e6:.0f} MB of replay output records (load average '
+          f'{os.getloadavg()[0]:.1f}); GB/s of one thread (best of 3, CPU time), ratio:')
+    sizes = (1 << 20, 2 << 20, 4 << 20, 8 << 20)
+    print(f"{'level':>6}" + ''.join(f'{f"{size >> 20} MiB chunks":>22}' for size in sizes))
+    for level in (1, -1, -3, -5, -7, -10):
+        compressor = zstandard.ZstdCompressor(level=level)
+        cells = []
+        for size in sizes:
+            best, packed = float('inf'), 0
+            for _ in range(3):
+                began = time.thread_time()
+                packed = sum(len(compressor.compress(data[i:i + size]))
+                             for i in range(0, len(data), size))
+                best = min(best, time.thread_time() - began)
+            cells.append(f'{len(data) / best / 1e9:9.2f} GB/s {len(data) / packed:5.2f}')
+        print(f'{level:6}' + ''.join(f'{cell:>22}' for cell in cells))
+    for threads in (1, 2):
+        compressor = zstandard.ZstdCompressor(level=-7, threads=threads)
+        walls = []
+        for _ in range(3):
+            began = time.perf_counter()
+            for i in range(0, len(data), 4 << 20):
+                compressor.compress(data[i:i + (4 << 20)])
+            walls.append(time.perf_counter() - began)
+        print(f"zstd's own threads: level -7, 4 MiB chunks, threads={threads}: "
+              f'{len(data) / min(walls) / 1e9:.2f} GB/s wall (best of 3)')
+
+
+BEFORE = """
+import os, resource, sys, time
+from cvc_balance.bag.replay import replay
+replay(sys.argv[1], sys.argv[2])          # a first run pays for its buffers: not timed
+before = resource.getrusage(resource.RUSAGE_SELF)
+began = time.perf_counter()
+summary = replay(sys.argv[1], sys.argv[2])
+wall = time.perf_counter() - began
+after = resource.getrusage(resource.RUSAGE_SELF)
+print(wall, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime,
+      os.stat(sys.argv[2]).st_size, summary.accepted)
+"""
+
+
+def replay_before(path, bag, out):
+    """Replay with zstd output by the code in ``path``: (wall s, CPU s, bytes, samples)."""
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, '-c', BEFORE, str(bag), str(out)], check=True,
+                          capture_output=True, text=True, cwd=Path(out).parent,
+                          env=dict(os.environ, PYTHONPATH=str(path)))
+    wall, cpu, size, accepted = done.stdout.split()
+    return float(wall), float(cpu), int(size), int(accepted)
+
+
+def tuning_table(bag, folder, repeat, before=None):
+    """Print whole replays with zstd output per chunk size and level, interleaved runs."""
+    module = importlib.import_module('cvc_balance.bag.replay')
+    chosen = (module.CHUNK_BYTES, module.LEVELS['zstd'])
+    configurations = [None] + [(size, level) for level in (-5, -7)
+                               for size in (1 << 20, 2 << 20, 4 << 20)]
+    if before:
+        configurations.insert(1, 'before')
+    runs = {c: [] for c in configurations}
+    out = folder / 'tune.mcap'
+    for _ in range(repeat):
+        for configuration in configurations:
+            if configuration == 'before':
+                load = os.getloadavg()[0]
+                wall, cpu, size, accepted = replay_before(before, bag, out)
+                runs[configuration].append((wall, cpu, size, load, accepted))
+                out.unlink()
+                continue
+            if configuration is not None:
+                module.CHUNK_BYTES, module.LEVELS['zstd'] = configuration
+            usage = resource.getrusage(resource.RUSAGE_SELF)
+            load = os.getloadavg()[0]
+            began = time.perf_counter()
+            summary = replay(bag, out if configuration else None)
+            wall = time.perf_counter() - began
+            after = resource.getrusage(resource.RUSAGE_SELF)
+            cpu = after.ru_utime + after.ru_stime - usage.ru_utime - usage.ru_stime
+            size = out.stat().st_size if configuration else 0
+            runs[configuration].append((wall, cpu, size, load, summary.accepted))
+            if configuration:
+                out.unlink()
+    module.CHUNK_BYTES, module.LEVELS['zstd'] = chosen
+    print(f'\nwhole replays, {repeat} runs each, interleaved (chosen: '
+          f'{chosen[0] >> 20} MiB chunks, level {chosen[1]}):')
+    print(f"{'output':28}{'wall s: median':>15}{'spread':>15}{'M samples/s':>12}"
+          f"{'CPU s':>8}{'MB':>6}{'load':>16}")
+    for configuration, values in runs.items():
+        wall = statistics.median(v[0] for v in values)
+        name = 'none' if configuration is None else 'before (--before), zstd' \
+            if configuration == 'before' else \
+            f'zstd {configuration[1]}, {configuration[0] >> 20} MiB'
+        loads = '/'.join(f'{v[3]:.1f}' for v in values)
+        print(f'{name:28}{wall:15.2f}{min(v[0] for v in values):8.2f} -'
+              f'{max(v[0] for v in values):5.2f}{values[0][4] / wall / 1e6:12.2f}'
+              f'{statistics.median(v[1] for v in values):8.2f}{values[0][2] / 1e6:6.0f}'
+              f'  {loads}')
+
+
 def main():
     """Print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--samples', type=int, default=1_000_000)
     parser.add_argument('--foreign-only', action='store_true',
                         help='only the bags written by the mcap library and rosbags')
+    parser.add_argument('--tune', action='store_true',
+                        help='only the tables that chose the zstd level and chunk size')
+    parser.add_argument('--repeat', type=int, default=5, help='runs of each, with --tune')
+    parser.add_argument('--before', metavar='PATH', help='with --tune: also replay with the '
+                        'code in PATH (a checkout before the change: the baseline)')
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix='cvc_replay_bench_'))
     bag, samples = make_bag(args.samples, folder)
-    print(f'bag: {samples} samples, {bag.stat().st_size / 1e6:.1f} MB ({bag})')
+    print(f'bag: {samples} samples, {bag.stat().st_size / 1e6:.1f} MB ({bag}); '
+          f'{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}')
+    if args.tune:
+        compression_table(replay_chunks(bag, folder))
+        tuning_table(bag, folder, args.repeat, args.before)
+        return
     if not args.foreign_only:
         time_replays(bag, time_rosbags(bag, samples, "the project's bag"), CONFIGURATIONS)
     messages = foreign_messages(bag)

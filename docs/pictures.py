@@ -144,8 +144,8 @@ PICTURES = (
         'bench', 'docs/bench.png',
         'error against time per sample of every way to compute the loads, per scene '
         '(measured: the times are this machine\'s; also writes docs/bench.csv)',
-        (), ('cvc_balance/study/bench.py',),
-        (('cvc-balance', 'bench', '--csv', 'docs/bench.csv', '--png', '{png}'),),
+        (), ('cvc_balance/study/bench.py', 'cvc_balance/study/methods.py'),
+        (('cvc-balance', 'bench', '--full', '--csv', 'docs/bench.csv', '--png', '{png}'),),
         measured=True),
 )
 BY_NAME = {p.name: p for p in PICTURES}

@@ -425,3 +425,77 @@ def test_rerun_opens_a_project_bag(tmp_path):
     paths = {str(chunk.entity_path) for chunk in RrdReader(str(out)).stream()}
     assert {'/joint_states', '/joint_states/position', '/joint_states/velocity',
             '/layout'} <= paths
+
+
+def read_with_mcap_library(path):
+    """{topic: [(log time, CDR bytes)]} and the summary, by the mcap library, CRCs checked."""
+    from mcap.reader import make_reader
+    out = {}
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, validate_crcs=True)    # every chunk's CRC
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            out.setdefault(channel.topic, []).append((message.log_time, message.data))
+        return out, reader.get_summary()
+
+
+def test_threaded_zstd_output_read_by_three_readers(tmp_path, monkeypatch):
+    """
+    A replay's zstd output whose buffers were filled and compressed on the writer's threads.
+
+    Chunks of 8 KiB (replay's CHUNK_BYTES, 4 MiB, made small) give more chunks than a block
+    has buffers, across the tube swap's two layouts: many buffers are filled at once, none on
+    the replaying thread. The mcap library (each chunk's CRC checked), rosbags and mcap_ros2
+    read every message: per topic the replay's accepted samples (the layout: one a
+    segment); the three decode the same stamps, frames and wrenches, the engine's own (the
+    live alpha estimator, as test_offline_replay_matches_the_engine_sample_by_sample has it).
+    """
+    import importlib
+    import threading
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    from cvc_balance.bag.mcap_writer import BUFFERS
+    module = importlib.import_module('cvc_balance.bag.replay')
+    monkeypatch.setattr(module, 'CHUNK_BYTES', 8 << 10)
+    filled_on = set()
+    fill = module.OutputBlocks._fill
+
+    def watched(self, buffer, **kwargs):
+        filled_on.add(threading.current_thread().name)
+        return fill(self, buffer, **kwargs)
+    monkeypatch.setattr(module.OutputBlocks, '_fill', watched)
+    scenario_file = ROOT / 'bags' / 'spin_up_tube_swap.yaml'
+    out = tmp_path / 'out.mcap'
+    summary = module.replay(scenario_file.with_suffix('.mcap'), out, compression='zstd')
+    assert filled_on and all(name.startswith('bag_pack') for name in filled_on)
+    assert len(summary.segments) == 2 and summary.accepted == \
+        len(load_scenario(scenario_file).stamps_ns())
+    with open(out, 'rb') as stream:
+        chunks = [r for r in StreamReader(stream, emit_chunks=True).records
+                  if isinstance(r, Chunk)]
+    assert len(chunks) > 4 * BUFFERS and {c.compression for c in chunks} == {'zstd'}
+    assert max(c.uncompressed_size for c in chunks) <= 8 << 10
+
+    raw, counts = read_with_mcap_library(out)
+    by_rosbags, by_mcap_ros2 = read_with_rosbags(out), read_with_mcap_ros2(out)
+    outputs = {'/bearing_load', '/unbalance', '/drive_torque', '/supports/front/load',
+               '/supports/rear/load'}
+    assert set(raw) == set(by_rosbags) == set(by_mcap_ros2) == outputs | {'/layout'}
+    channels = {c.id: c.topic for c in counts.channels.values()}
+    for topic in raw:
+        count = 2 if topic == '/layout' else summary.accepted
+        assert len(raw[topic]) == len(by_rosbags[topic]) == len(by_mcap_ros2[topic]) == count
+        assert sum(n for c, n in counts.statistics.channel_message_counts.items()
+                   if channels[c] == topic) == count
+    expected, _ = expected_outputs(scenario_file)
+    for topic in outputs:
+        ours = [(t, stamp_ns(m), m.header.frame_id, wrench(m)) for t, m in by_rosbags[topic]]
+        theirs = [(t, stamp_ns(m), m.header.frame_id, wrench(m))
+                  for t, m in by_mcap_ros2[topic]]
+        assert ours == theirs, topic
+        assert [t for t, _ in raw[topic]] == [t for t, *_ in ours], topic
+        frame = 'rotor' if topic in ('/unbalance', '/drive_torque') else 'stator'
+        assert {f for _, _, f, _ in ours} == {frame}
+        values = np.array([w for *_, w in ours])
+        reference = np.array([expected[s][topic] for _, s, _, _ in ours])
+        bound = 2e-12 if topic == '/drive_torque' else 4e-15     # as measured there
+        assert np.abs(values - reference).max() <= bound * np.abs(reference).max(), topic

@@ -371,6 +371,8 @@ def test_machine_id_in_bags_read_by_others(tmp_path):
     (['simulate-fleet', 'config/thesis_two_particles.yaml', '-o', 'x'], "no component"),
     (['simulate', 'bags/spin_up_tube_swap.yaml', '-o', 'x.mcap', '--machine-id', 'a b'],
      'machine id'),
+    (['simulate-fleet', 'config/ct_gantry.yaml', '-o', 'x', '--steady', '0'],
+     '--steady: must be > 0'),
 ])
 def test_bad_input_one_line_exit_2(argv, says, tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
@@ -406,3 +408,55 @@ def test_node_and_recorder_write_the_machine_id(tmp_path):
     assert yaml.safe_load((own / 'metadata.yaml').read_text())[
         'rosbag2_bagfile_information']['custom_data'] == {'machine_id': 'site-b/gantry-0042'}
     assert machine_of(tmp_path / 'rec.mcap') == ('gantry-0043', 'bag')
+
+
+def test_simulate_fleet_steady_lengthens_each_run(tmp_path):
+    """
+    ``--steady SECONDS`` at the service speed: 7 s more steady running, 700 more samples.
+
+    Counted by rosbags in the bags written (one machine, one run, 100 Hz encoder and cells);
+    the spin-up and coast-down are the same.
+    """
+    from rosbags.highlevel import AnyReader
+    counts = {}
+    for steady in (3, 10):
+        out = tmp_path / f'steady{steady}'
+        code, text, err = run_cli('simulate-fleet', LAYOUT, '-o', out, '--machines', 1,
+                                  '--runs', 1, '--steady', steady)
+        assert code == 0, err
+        (bag, _), = find_bags([out])
+        with AnyReader([bag]) as reader:
+            counts[steady] = {c.topic: c.msgcount for c in reader.connections}
+    assert {t: counts[10][t] - counts[3][t] for t in counts[3] if t != '/layout'} == {
+        '/joint_states': 700, '/supports/front/measured_load': 700,
+        '/supports/rear/measured_load': 700}
+
+
+def test_digest_tasks_split_by_bytes_and_count():
+    """Ten-minute runs (106 MB) one a task; small checks 32 a task; never an empty task."""
+    from cvc_balance.fleet.engine import DIGEST_BATCH, DIGEST_BYTES, digest_batches
+    assert (DIGEST_BATCH, DIGEST_BYTES) == (32, 64 << 20)
+    big = [f'b{i}' for i in range(5)]
+    assert digest_batches(big, [106 << 20] * 5) == [[b] for b in big]
+    small = [f's{i}' for i in range(70)]
+    assert digest_batches(small, [140 << 10] * 70) == [small[:32], small[32:64], small[64:]]
+    mixed = digest_batches(['a', 'b', 'c', 'd'], [40 << 20, 20 << 20, 10 << 20, 0])
+    assert mixed == [['a', 'b'], ['c', 'd']]           # 60 MB, then 10 MB (+ unknown size)
+    assert digest_batches([], []) == []
+
+
+def test_a_worker_imports_only_what_its_tasks_need():
+    """
+    A Dask worker imports ``fleet.tasks``: not the trends' scipy.stats and DuckDB, nor Dask.
+
+    In a fresh process; the package's public names still there when asked for.
+    """
+    code = ('import sys, cvc_balance.fleet.tasks\n'
+            'print(sorted(m for m in ("scipy.stats", "duckdb", "dask", "distributed", '
+            '"matplotlib") if m in sys.modules))\n'
+            'from cvc_balance.fleet import run_fleet, machine_trends, FleetReport\n'
+            'print(run_fleet.__module__, machine_trends.__module__, FleetReport.__name__)')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          check=True, cwd=ROOT)
+    assert done.stdout.splitlines() == [
+        '[]', 'cvc_balance.fleet.engine cvc_balance.fleet.trends FleetReport']

@@ -189,18 +189,9 @@ def test_unbalance_vector_is_smooth_where_its_norm_has_a_kink():
 
 
 def bench_rows():
-    import csv
     from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / 'docs' / 'bench.csv'
-    rows = []
-    with open(path, newline='') as stream:
-        for row in csv.DictReader(stream):
-            row['samples'] = int(row['samples'])
-            if row['samples']:
-                row['seconds_per_sample'] = float(row['seconds_per_sample'])
-                row['max_relative_error'] = float(row['max_relative_error'])
-            rows.append(row)
-    return rows
+    from cvc_balance.study.bench import read_rows
+    return read_rows(Path(__file__).resolve().parents[1] / 'docs' / 'bench.csv')
 
 
 def test_bench_table_is_the_current_engine():
@@ -213,3 +204,121 @@ def test_bench_table_is_the_current_engine():
         error = method_error('aggregated', layout, q, omega, alpha, gravity)
         assert error == pytest.approx(rows[(scene, 'aggregated')]['max_relative_error'],
                                       rel=1e-6, abs=1e-18)
+
+
+def bench_row(method, seconds, error, scene='s'):
+    return {'scene': scene, 'method': method, 'samples': 8, 'seconds_per_sample': seconds,
+            'max_relative_error': error}
+
+
+def test_quick_bench_compared_with_the_full_one_conclusion_by_conclusion():
+    """
+    What ``bench`` says when a quick run's conclusions are not the full run's.
+
+    Orders the full run sets 2x apart in time or 10x in error must hold; closer ones are
+    ties (timing noise may swap them). A method on one run's Pareto front, and not nearly
+    beaten there (by one 2x faster and not 10x less accurate, or 10x more accurate and not
+    2x slower), must not be dominated in the other's (by one at least as fast and as
+    accurate, 2x faster or 10x more accurate). A method skipped in one run but not the
+    other is a different chart.
+    """
+    from cvc_balance.study.bench import compare
+    full = [bench_row('engine', 1e-7, 1e-16), bench_row('f32', 0.4e-7, 1e-7),
+            bench_row('sums', 3e-7, 1.0), bench_row('loop', 3.3e-7, 1e-14)]
+    assert compare(full, full) == []
+    # sums and loop are a tie in time (1.1x): swapping them says nothing.
+    tie = [bench_row('engine', 1e-7, 1e-16), bench_row('f32', 0.4e-7, 1e-7),
+           bench_row('sums', 3.3e-7, 1.0), bench_row('loop', 3e-7, 1e-14)]
+    assert compare(tie, full) == []
+    # loop, exact to rounding too, a hair faster than the engine in one run (on its front),
+    # a hair slower in the other (off it): within the noise, not a different conclusion.
+    near = [dict(r) for r in full]
+    near[3].update(seconds_per_sample=0.9e-7, max_relative_error=2e-16)
+    nearer = [dict(r) for r in near]
+    nearer[3]['seconds_per_sample'] = 1.1e-7
+    assert compare(nearer, near) == compare(near, nearer) == []
+    # f32 slower than the engine: off the front, and one order swapped.
+    slow = [bench_row('engine', 1e-7, 1e-16), bench_row('f32', 1.5e-7, 1e-7),
+            bench_row('sums', 3e-7, 1.0), bench_row('loop', 3.3e-7, 1e-14)]
+    assert compare(slow, full) == [
+        's: f32 on the Pareto front of the full run, dominated in the quick run',
+        's: f32 not faster than engine, as the full run has it']
+    # loop's error above f32's and the sums': orders the full run sets 1e7 and 1e14 apart.
+    wrong = [dict(r) for r in full]
+    wrong[3]['max_relative_error'] = 2.0
+    assert compare(wrong, full) == ['s: loop not more accurate than f32, as the full run has it',
+                                    's: loop not more accurate than sums, as the full run has it']
+    skipped = [dict(r) for r in full]
+    skipped[3]['samples'] = 0
+    assert compare(skipped, full) == ["s: methods run ['engine', 'f32', 'sums'], the full run "
+                                      "['engine', 'f32', 'loop', 'sums']"]
+
+
+def test_quick_bench_runs_costly_methods_on_fewer_samples_and_keeps_the_accuracy_conclusions(
+        tmp_path):
+    """
+    The quick run on two scenes against the full run on the same: errors are not timings.
+
+    The quick run gives the costly methods an eighth of the full run's work, but at least 32
+    samples (particles_1000: 312 of 512 with 12 bodies; particles_10000: 32 of 250); the
+    others keep every sample. The engine is the most accurate in both runs,
+    and the order of every two methods the full run sets 10x apart in error is the quick
+    run's. (Their speeds and fronts are compared by benchmarks/bench_time.py: timings vary
+    with the machine's load.)
+    """
+    from cvc_balance.study.bench import ACCURACY_GAP, ranked_pairs, read_rows, run
+    from cvc_balance.study.bench import scenes
+    chosen = ('spin-up', 'near-balance')
+    layouts = {name: scene[0].components for name, scene in
+               scenes(np.random.default_rng(0), large=False).items()}
+    rows = {}
+    for full in (False, True):
+        csv_path = tmp_path / f'{full}.csv'
+        returned = run(csv_path, None, full=full, only=chosen, print_table=lambda line: None)
+        rows[full] = read_rows(csv_path)
+        assert [r['samples'] for r in returned] == [r['samples'] for r in rows[full]]
+    assert {r['scene'] for r in rows[True]} == set(chosen) and len(rows[True]) == 22
+    for quick, full in zip(rows[False], rows[True]):
+        assert (quick['scene'], quick['method']) == (full['scene'], full['method'])
+        per_body = {'particles_1000': 1000, 'particles_10000': 10_000}.get(full['method'], 1)
+        bodies = len(layouts[full['scene']]) * per_body
+        assert full['samples'] == min(512, int(3e7 // bodies))
+        assert quick['samples'] == min(full['samples'], max(32, int(3e7 / 8 // bodies)))
+        assert quick['samples'] < full['samples'] or bodies < 12_000
+    for scene in chosen:
+        for kind in (False, True):
+            done = [r for r in rows[kind] if r['scene'] == scene]
+            assert min(done, key=lambda r: r['max_relative_error'])['method'] == 'aggregated'
+        wanted = ranked_pairs(rows[True], scene, 'max_relative_error', ACCURACY_GAP)
+        assert len(wanted) > 20
+        assert wanted <= ranked_pairs(rows[False], scene, 'max_relative_error', 1.0)
+
+
+def test_stored_references_are_the_scenes():
+    """
+    The quick bench's stored 40-digit references: the scenes' layouts, computed again.
+
+    Each of the six scenes' layouts has its entry (by digest; spin-up's is axial offsets');
+    the small ones equal basis_wrenches computed now, digit for digit. The 10^5-component
+    scene's (1.5 minutes to compute; the full bench does) is checked against the engine's
+    double-double aggregates: mass, static unbalance and couple about O to 1e-15.
+    """
+    from cvc_balance.physics.engine import RotorModel
+    from cvc_balance.study.bench import layout_digest, scenes, stored_references
+    from cvc_balance.study.exact import basis_wrenches, BASIS
+    stored = stored_references()
+    every = scenes(np.random.default_rng(0))
+    assert len(stored) == len({layout_digest(scene[0]) for scene in every.values()}) == 5
+    for scene, (layout, *_) in every.items():
+        basis = stored[layout_digest(layout)]
+        if scene != '1e5 components':
+            assert basis == basis_wrenches(layout), scene
+            continue
+        model = RotorModel.from_layout(layout)
+        force, moment, _ = basis[BASIS.index('omega2')]     # (S_x, S_y, 0), (-P_yz, P_xz)
+        assert float(force[0]) == pytest.approx(model.s_x, rel=1e-15)
+        assert float(force[1]) == pytest.approx(model.s_y, rel=1e-15)
+        assert float(moment[1]) == pytest.approx(model.p_xz, rel=1e-15)
+        assert float(moment[0]) == pytest.approx(-model.p_yz, rel=1e-15)
+        gravity_force, _, _ = basis[BASIS.index('g_z')]          # m e_z
+        assert float(gravity_force[2]) == pytest.approx(model.mass, rel=1e-15)

@@ -329,31 +329,42 @@ class BagWriter:
         if len(self._pending) >= self._chunk_bytes:
             self._flush_pending()
 
-    def write_block(self, block, log_time, count=None):
+    def write_block(self, block, log_time, count=None, fill=None):
         """
         Add the first ``count`` samples of a :class:`MessageBlock` (default all).
 
         ``log_time`` (count,) ns, non-decreasing, is set on the block. The
         buffer is not copied: it goes to the worker threads, which compress
         its chunks and write them in order, and the block takes another buffer
-        for the next fill (:meth:`MessageBlock.hand_over`).
+        for the next fill (:meth:`MessageBlock.hand_over`). ``fill(buffer)``, if
+        given, sets the buffer's fields on a worker thread first (instead of the
+        caller before the call): several buffers are then filled at once.
         """
         self._flush_pending()
         count = block.n if count is None else count
         log_time = np.array(log_time[:count], dtype=np.uint64)   # kept until written
         buffer = block.buffer()
-        buffer.set_time(log_time, count)
         data = buffer.bytes.data
         per_chunk = max(1, self._chunk_bytes // block.group_size)
+        spans = [(start, min(start + per_chunk, count)) for start in range(0, count, per_chunk)]
+        chunks = [data[a * block.group_size:b * block.group_size] for a, b in spans]
+        if fill is None:
+            buffer.set_time(log_time, count)
+            packed = [self._workers.submit(self._pack, records) for records in chunks]
+        else:
+            def fill_and_pack():
+                fill(buffer)
+                buffer.set_time(log_time, count)
+                return [self._pack(records) for records in chunks]
+            together = self._workers.submit(fill_and_pack)
+            packed = [_Part(together, i) for i in range(len(chunks))]
         job = None
-        for start in range(0, count, per_chunk):
-            stop = min(start + per_chunk, count)
-            records = data[start * block.group_size:stop * block.group_size]
+        for (start, stop), records, part in zip(spans, chunks, packed):
             times = log_time[start:stop]
-            index = (block, stop - start, times)
             for channel in block.channels:
                 self._counts[channel] += stop - start
-            job = self._submit(records, index, int(times[0]), int(times[-1]))
+            job = self._queue_write(part, len(records), (block, stop - start, times),
+                                    int(times[0]), int(times[-1]))
         if job is not None:
             block.hand_over(job)
 
@@ -471,9 +482,12 @@ class BagWriter:
 
     def _submit(self, records, index, start_time, end_time):
         """Compress a chunk on a worker thread; write it, in order, on the I/O thread."""
-        packed = self._workers.submit(self._pack, records)
-        job = self._io.submit(self._write_chunk, packed, len(records), index, start_time,
-                              end_time)
+        return self._queue_write(self._workers.submit(self._pack, records), len(records),
+                                 index, start_time, end_time)
+
+    def _queue_write(self, packed, size, index, start_time, end_time):
+        """Write a chunk (``packed``: its future (data, CRC)) on the I/O thread, in order."""
+        job = self._io.submit(self._write_chunk, packed, size, index, start_time, end_time)
         self._io_jobs.append(job)
         while len(self._io_jobs) > 32:          # bound the memory held by chunks in flight
             self._io_jobs.popleft().result()
@@ -548,6 +562,17 @@ class BagWriter:
                           chunk_count=self._chunk_count,
                           message_start_time=start or 0, message_end_time=end or 0,
                           channel_message_counts=dict(self._counts))
+
+
+class _Part:
+    """Chunk ``i`` of a job that packs several: ``result()`` is its (data, CRC)."""
+
+    def __init__(self, job, i):
+        self.job, self.i = job, i
+
+    def result(self):
+        """Return (data, CRC) of the chunk, waiting for the job."""
+        return self.job.result()[self.i]
 
 
 class TopicWritten(NamedTuple):

@@ -7,6 +7,7 @@ the same outputs and frames. No ROS graph is needed.
 """
 
 from dataclasses import dataclass, field
+from functools import partial
 import time
 
 import numpy as np
@@ -33,14 +34,16 @@ BLOCK = 1 << 14
 SAID = 5
 """Rejected layout messages described one by one (the others counted)."""
 """Samples computed at once (the engine's work arrays stay in cache)."""
-LEVELS = {'zstd': -5, 'lz4': -1}
+LEVELS = {'zstd': -7, 'lz4': -1}
+CHUNK_BYTES = 4 << 20
 """
-Compression levels of the output's chunks: compressing is most of replay's work.
-
-Measured on a replay's WrenchStamped chunks (1 MiB), one core of the 2-core
-development machine: zstd level 1 0.84 GB/s (ratio 4.40), -3 1.27 GB/s (3.91),
--5 1.52 GB/s (3.81), a whole 10^6-sample replay 1.05 s, 0.85 s and 0.75 s;
-lz4 0 1.11 GB/s (3.10), -1 1.30 GB/s (3.28).
+Compression level and chunk size (uncompressed) of the output: compressing is most of
+replay's work. Chosen by measurement (``benchmarks/replay_throughput.py --tune`` prints the
+tables): on a replay's WrenchStamped chunks, one thread of the 2-core development machine,
+zstd -7 compresses 1.5-1.6 GB/s to a ratio of 4.09, faster and smaller than -5 (1.4-1.5
+GB/s, 3.82), -3 (1.2 GB/s, 4.1) or 1 (0.8 GB/s, 4.45); the chunk size changes neither by
+more than the noise between 1 and 8 MiB, and 4 MiB chunks took the least CPU time per
+replay; lz4 0 1.11 GB/s (3.10), -1 1.30 GB/s (3.28).
 """
 
 
@@ -234,8 +237,8 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
         summary.input_checks = [
             InputCheck(motion.joint_topic, None, finding, seen, judged)
             for finding, seen, judged in run_motion_findings(stamp * 1e-9, angle, omega)]
-    writer = open_writer(output, compression=compression,
-                         level=LEVELS.get(compression)) if output else None
+    writer = open_writer(output, compression=compression, level=LEVELS.get(compression),
+                         chunk_bytes=CHUNK_BYTES) if output else None
     channels = _output_channels(writer) if writer else None
     if writer:
         for log, _, text in in_force:
@@ -325,8 +328,10 @@ class OutputBlocks:
         stamps = ((sec & 0xFFFFFFFF) | (nanosec << 32)).astype(np.uint64)
         for a in range(0, len(stamp), block.n):
             b = min(a + block.n, len(stamp))
-            self._fill(block.buffer(), wrenches, result.drive_torque, stamps, omega, a, b)
-            self.writer.write_block(block, log_time[a:b], b - a)
+            # Filled on the writer's threads, several chunks at once.
+            self.writer.write_block(block, log_time[a:b], b - a, partial(
+                self._fill, wrenches=wrenches, drive_torque=result.drive_torque,
+                stamps=stamps, omega=omega, a=a, b=b))
 
     def _fill(self, buffer, wrenches, drive_torque, stamps, omega, a, b):
         n, names = b - a, self.names

@@ -346,9 +346,9 @@ class Rosbag2Writer:
         """Return a message block of one chunk's samples (see BagWriter)."""
         return self.writer.block(parts)
 
-    def write_block(self, block, log_time, count=None):
+    def write_block(self, block, log_time, count=None, fill=None):
         """Add samples of a message block (see BagWriter)."""
-        self.writer.write_block(block, log_time, count)
+        self.writer.write_block(block, log_time, count, fill)
 
     def close(self):
         """Finalise the MCAP file, then write metadata.yaml."""

@@ -87,6 +87,9 @@ def register(commands):
                 help='encoder samples/s (default 100)')
     add_bounded(simulate, '--cell-rate', limit=limits.SAMPLE_RATE, default=100.0,
                 metavar='HZ', help='load-cell readings/s (default 100)')
+    add_bounded(simulate, '--steady', limit=limits.STEADY, default=3.0, metavar='SECONDS',
+                help="each run's time at the service speed (default 3; 596 makes 10-minute "
+                'runs)')
     simulate.set_defaults(run=_simulate)
 
 
@@ -216,7 +219,7 @@ def _simulate(args):
     check_output(args.output, [args.layout], directory=True)     # before the work
     plans = simulate_fleet(args.layout, args.output, args.machines, args.runs, args.days,
                            args.start.replace(tzinfo=None).isoformat(), args.seed, args.rate,
-                           args.cell_rate)
+                           args.cell_rate, steady=args.steady)
     truth = [{'machine_id': p.machine_id, 'kind': p.kind,
               'slip_mm_per_day': p.slip_mm_per_day,
               'tube_swap': p.swap.isoformat() if p.swap else None,

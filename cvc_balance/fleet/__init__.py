@@ -7,13 +7,21 @@ replay record, on Dask or in this process, into a Parquet table and a table of f
 :func:`machine_trends` (per machine and plane the unbalance over time, its fitted drift and
 the date it is projected to leave its grade; DuckDB over the table), :func:`simulate_fleet`
 (machines x runs over months with drifts, as bags). Layer 3: above ``bag``.
+
+Each is imported when first asked for: a Dask worker that imports ``fleet.tasks`` does not
+pay for the trends' scipy.stats and DuckDB, nor for Dask itself (0.6 s a worker here).
 """
 
-from cvc_balance.fleet.digest import content_digest
-from cvc_balance.fleet.discover import find_bags
-from cvc_balance.fleet.engine import FleetReport, run_fleet
-from cvc_balance.fleet.simulate import simulate_fleet
-from cvc_balance.fleet.trends import machine_trends
+import importlib
 
-__all__ = ['content_digest', 'find_bags', 'FleetReport', 'machine_trends', 'run_fleet',
-           'simulate_fleet']
+_HOMES = {'content_digest': 'digest', 'find_bags': 'discover', 'FleetReport': 'engine',
+          'machine_trends': 'trends', 'run_fleet': 'engine', 'simulate_fleet': 'simulate'}
+
+__all__ = sorted(_HOMES, key=str.lower)
+
+
+def __getattr__(name):
+    """Return a public name of the package, importing its module on first use."""
+    if name not in _HOMES:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    return getattr(importlib.import_module(f'{__name__}.{_HOMES[name]}'), name)

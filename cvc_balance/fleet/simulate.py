@@ -66,13 +66,15 @@ class MachinePlan:
 
 def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
                    start='2026-01-05T08:00:00', seed=0, rate=100.0, cell_rate=100.0,
-                   counterweight='counterweight_rear', tube='xray_tube'):
+                   counterweight='counterweight_rear', tube='xray_tube', steady=3.0):
     """
     Write a fleet's bags under ``directory``; return [MachinePlan].
 
     ``layout_path``: the layout of every machine (a layout file with components named
     ``counterweight`` and ``tube``); ``days``: span of the runs; ``start``: the first
-    run's date (ISO 8601, UTC); ``rate``, ``cell_rate``: encoder and load-cell samples/s.
+    run's date (ISO 8601, UTC); ``rate``, ``cell_rate``: encoder and load-cell samples/s;
+    ``steady``: seconds of each run at the service speed (between a spin-up and a coast-down
+    at 12 rad/s^2).
     """
     layout = read_document(layout_path, MAX_TEXT_BYTES)
     if not isinstance(layout, dict) or not isinstance(layout.get('components'), list):
@@ -82,8 +84,8 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
         if name not in names:
             raise ValueError(f'{layout_path}: no component {name!r} (the simulated fleet '
                              'moves a counterweight and swaps a tube)')
-    if machines < 1 or runs < 1 or not days > 0:
-        raise ValueError('a fleet needs machines >= 1, runs >= 1 and days > 0')
+    if machines < 1 or runs < 1 or not days > 0 or not steady > 0:
+        raise ValueError('a fleet needs machines >= 1, runs >= 1, days > 0 and steady > 0')
     speed = (layout.get('balancing') or {}).get('service_speed') or SERVICE_SPEED
     first = datetime.fromisoformat(start).replace(tzinfo=timezone.utc)
     rng = np.random.default_rng(seed)
@@ -103,7 +105,7 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
                 name = when.strftime('%Y-%m-%dT%H%M%S')
                 path = folder / (name if k % 3 == 2 else f'{name}.mcap')
                 spec = _scenario(plan, declared, true, when, rate, cell_rate, speed,
-                                 seed * 100003 + i * 101 + k)
+                                 seed * 100003 + i * 101 + k, steady)
                 spec_path = Path(scratch) / 'run.yaml'
                 spec_path.write_text(dump_document(spec), encoding='utf-8')
                 write_bag(load_scenario(spec_path), path, machine_id=plan.machine_id)
@@ -151,7 +153,7 @@ def _state(layout, plan, when, first, counterweight, tube):
     return declared, true
 
 
-def _scenario(plan, declared, true, when, rate, cell_rate, speed, seed):
+def _scenario(plan, declared, true, when, rate, cell_rate, speed, seed, steady):
     """Return the scenario of one run: a short check at the service speed, load cells."""
     hidden = [{'at': 0.0, 'add': dict(plan.as_built)}]
     by_name = {c['name']: c for c in declared['components']}
@@ -170,7 +172,7 @@ def _scenario(plan, declared, true, when, rate, cell_rate, speed, seed):
         'start': when.timestamp(),
         'noise': {'angle': 1.0e-4, 'speed': 0.005},
         'profile': [{'type': 'spin_up', 'to': speed, 'alpha': 12.0},
-                    {'type': 'steady', 'duration': 3.0},
+                    {'type': 'steady', 'duration': steady},
                     {'type': 'coast_down', 'to': 0.0, 'alpha': -12.0}],
         'hidden': hidden,
         'load_cells': {'rate': cell_rate, 'noise': 15.0,

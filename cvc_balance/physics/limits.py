@@ -179,3 +179,5 @@ RUNS = Limit(1, 1000, 'runs', 'a bag each')
 """Runs per machine of a simulated fleet."""
 DAYS = Limit(0.001, 36_500.0, 'days', 'a century')
 """Span of a simulated fleet's runs."""
+STEADY = Limit(0.01, 86_400.0, 's', 'a day at most')
+"""Time of each simulated run at the service speed."""
