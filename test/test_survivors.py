@@ -137,3 +137,61 @@ def test_the_live_window_holds_exactly_window_revs_whole_revolutions():
     # hold it; from close window + 1 on, only the heavy rotor.
     assert all(e > 1e-3 for e in errors[:window]), errors
     assert all(e < 1e-11 for e in errors[window:]), errors
+
+
+# -- field/plan: the vector split and the fewest weights --------------------------------
+
+def test_the_vector_split_wraps_round_past_the_last_site():
+    """
+    Bug: the site before a correction past the last site taken as angles[-1], not - 2 pi.
+
+    Sites at 45, 165 and 285 deg (R 0.5 m): a correction of 0.06 kg m at 10 deg lies
+    between 285 (= -75) and 45 deg, and one at 300 deg between 285 and 405 (= 45). Each
+    share from the 2x2 linear system m_a R e^{i phi_a} + m_b R e^{i phi_b} = U, solved by
+    numpy. With the bug the 10 deg correction went whole to 285 deg.
+    """
+    from cvc_balance.field.plan import vector_split
+    from cvc_balance.physics.layout import WeightSites
+    sites = WeightSites('I', tuple(np.radians([45.0, 165.0, 285.0])), 0.5, (0.01,), 1)
+    for degrees, pair in ((10.0, (285.0, 45.0)), (300.0, (285.0, 45.0)),
+                          (100.0, (45.0, 165.0)), (200.0, (165.0, 285.0))):
+        correction = 0.06 * cmath.exp(1j * math.radians(degrees))
+        shares = vector_split(correction, sites)
+        got = {round(math.degrees(a), 9): m for a, m in shares}
+        phi = np.radians(pair)
+        system = 0.5 * np.array([np.cos(phi), np.sin(phi)])
+        masses = np.linalg.solve(system, [correction.real, correction.imag])
+        assert set(got) == set(pair), (degrees, got)
+        assert masses.min() > 0.0
+        for angle, mass in zip(pair, masses):
+            assert abs(got[angle] - mass) <= 1e-15, (degrees, angle, got[angle], mass)
+
+
+def test_the_fewest_weights_keep_every_residual_within_its_limit():
+    """
+    Bug: the fewest-weights plan's polygon about the limit's circle (cos(pi/K) -> 1.0).
+
+    One plane, two sites 90 deg apart at pi/K (R 0.5 m, one 0.1 kg weight each), the
+    unbalance -(U_a + U_b) of both weights: no weight leaves |r| = 1.41 of the limit, one
+    weight 1.002 of it (at a vertex of the 32-gon, where the polygon about the circle
+    reaches 1/cos(pi/32) = 1.0048), both weights 0. Enumerating the four loadings, the
+    fewest weights with |r| within the limit is 2: with the bug the plan took one, 0.2 %
+    over the limit, and called it optimal.
+    """
+    from cvc_balance.field import optimal_plan, problem_from_unbalance
+    from cvc_balance.physics.layout import WeightSites
+    polygon = 32
+    first = math.pi / polygon
+    sites = {'I': WeightSites('I', (first, first + math.pi / 2), 0.5, (0.1,), 1)}
+    each = [0.05 * cmath.exp(1j * a) for a in sites['I'].angles]
+    unbalance = -(each[0] + each[1])
+    limit = 0.05 / 1.002
+    problem = problem_from_unbalance(('I',), [unbalance], permissible=[limit])
+    loadings = ((0j, 0), (each[0], 1), (each[1], 1), (each[0] + each[1], 2))
+    reach = [abs(unbalance + u) / limit for u, _ in loadings]
+    assert abs(reach[1] - 1.002) < 1e-12 and abs(reach[2] - 1.002) < 1e-12
+    within = [n for (u, n), r in zip(loadings, reach) if r <= 1.0]
+    plan = optimal_plan(problem, sites, 'fewest', polygon=polygon)
+    after = abs(problem.residual(plan.corrections)[0])
+    assert plan.status == 'optimal' and plan.count == min(within) == 2, plan
+    assert after <= limit and plan.residual.within_limits, after / limit
