@@ -195,3 +195,123 @@ def test_the_fewest_weights_keep_every_residual_within_its_limit():
     after = abs(problem.residual(plan.corrections)[0])
     assert plan.status == 'optimal' and plan.count == min(within) == 2, plan
     assert after <= limit and plan.residual.within_limits, after / limit
+
+
+# -- fleet: discovery, failures, trends --------------------------------------------------
+
+def test_db3_files_and_rosbag2_directories_are_found_and_nothing_else(tmp_path):
+    """
+    Bug: ``.db3`` bags never found (the suffix dropped from the list).
+
+    A tree made by hand: its bags, by hand, in name order: a bare SQLite bag, MCAP
+    files, a rosbag2 directory (whose split files are not bags of their own); not a text
+    file, a hidden file or a staging folder.
+    """
+    from cvc_balance.fleet import find_bags
+    (tmp_path / 'a').mkdir()
+    for name in ('a/run_1.db3', 'a/run_2.mcap', 'a/notes.txt', 'a/.hidden.mcap',
+                 'b.DB3.txt', 'c.db3'):
+        (tmp_path / name).write_bytes(b'x')
+    split = tmp_path / 'a' / 'split'
+    split.mkdir()
+    (split / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')
+    (split / 'split_0.db3').write_bytes(b'x')
+    (tmp_path / 'out.partial').mkdir()
+    (tmp_path / 'out.partial' / 'x.db3').write_bytes(b'x')
+    found = [(str(bag.relative_to(tmp_path)), root) for bag, root in find_bags([tmp_path])]
+    assert sorted(found) == [('a/run_1.db3', tmp_path), ('a/run_2.mcap', tmp_path),
+                             ('a/split', tmp_path), ('c.db3', tmp_path)]
+    # A bag given by itself is taken whatever its suffix.
+    assert find_bags([tmp_path / 'c.db3']) == [(tmp_path / 'c.db3', tmp_path)]
+
+
+def test_a_broken_link_gets_a_failure_row(tmp_path):
+    """
+    Bug: an unreadable bag (a broken symbolic link) skipped without a failure row.
+
+    The tables read back by pyarrow: no result, one failure naming the link and why.
+    """
+    import pyarrow.parquet as pq
+    from cvc_balance.fleet import run_fleet
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    (runs / 'lost.mcap').symlink_to(tmp_path / 'gone.mcap')
+    report = run_fleet([runs], tmp_path / 'fleet.parquet', engine='local', progress=False)
+    assert (report.found, report.analysed, report.failed) == (1, 0, 1)
+    failures = pq.read_table(tmp_path / 'fleet.failures.parquet').to_pylist()
+    assert [(row['bag'], row['reason']) for row in failures] == [
+        (str(runs / 'lost.mcap'), f'a symbolic link to {tmp_path / "gone.mcap"}, which does '
+         'not exist (a broken link): not read')]
+    assert pq.read_table(tmp_path / 'fleet.parquet').num_rows == 0
+
+
+def series_of(days, amounts, digests, permissible=1000.0):
+    """A machine's series as :func:`cvc_balance.fleet.trends.read_series` gives it."""
+    n = len(days)
+    day_ns = 86_400 * 10**9
+    return {'t': (1_760_000_000 * 10**9 + np.asarray(days) * day_ns).astype(np.int64),
+            'layout_digest': np.array(digests, dtype=object),
+            'layout_name': np.array(['gantry'] * n, dtype=object),
+            'grade': np.full(n, 6.3),
+            'amount_I': np.asarray(amounts, float), 'ci95_I': np.full(n, np.nan),
+            'permissible_I': np.full(n, permissible), 'identified_I': np.zeros(n, bool),
+            'amount_II': np.full(n, np.nan), 'ci95_II': np.full(n, np.nan),
+            'permissible_II': np.full(n, permissible), 'identified_II': np.zeros(n, bool)}
+
+
+def test_a_layout_changes_step_and_its_half_width_against_least_squares_by_hand():
+    """
+    Bug: a step's half-width with the wrong sign of its covariance term (+2 c_ab).
+
+    The reference fits the same runs with the step a coefficient of its own (columns 1,
+    after-the-change, days): its estimate and its 95 % half-width t_{0.975, n-3}
+    sqrt(s^2 [(X^T X)^-1]_11) by numpy and scipy's t. Measured: the step to 1.3e-14, its
+    half-width to 5.7e-14 relative; with the bug 91.7 g mm against 60.9.
+    """
+    from scipy import stats
+    from cvc_balance.fleet.trends import fit_machine
+    days = np.array([0.0, 9.0, 21.0, 30.0, 44.0, 60.0, 71.0, 85.0, 98.0, 120.0])
+    after = days >= 50.0
+    noise = np.array([12.0, -30.0, 8.0, 25.0, -14.0, 3.0, -22.0, 17.0, -6.0, 9.0])
+    amounts = 400.0 + 1.5 * days + 150.0 * after + noise
+    machine = fit_machine('m', series_of(days, amounts, np.where(after, 'new', 'old')))
+    (change,) = machine.changes
+    step, half = change.steps['I']
+    design = np.column_stack([np.ones(len(days)), after.astype(float), days])
+    coefficients, *_ = np.linalg.lstsq(design, amounts, rcond=None)
+    residual = amounts - design @ coefficients
+    dof = len(days) - 3
+    variance = residual @ residual / dof
+    half_by_hand = stats.t.ppf(0.975, dof) * math.sqrt(
+        variance * np.linalg.inv(design.T @ design)[1, 1])
+    assert abs(step - coefficients[1]) <= 1e-12 * abs(coefficients[1]), (step, coefficients)
+    assert abs(half - half_by_hand) <= 1e-12 * half_by_hand, (half, half_by_hand)
+
+
+def test_a_run_analysed_again_counts_by_its_latest_row(tmp_path):
+    """
+    Bug: a re-analysed run keeping its OLDEST row (``analysed_at`` ascending).
+
+    A results table written by hand: one run analysed twice (the later row says 700 g mm,
+    the earlier 500), one other run. The series must hold 700 for that run, once.
+    """
+    import pyarrow.parquet as pq
+    from cvc_balance.fleet.rows import RESULT_SCHEMA, table
+    from cvc_balance.fleet.trends import read_series
+    day = 86_400 * 10**9
+    start = 1_760_000_000 * 10**9
+
+    def row(when, analysed, amount):
+        return {'machine_id': 'm1', 'segment_start': when, 'layout_digest': 'd1',
+                'layout_name': 'gantry', 'grade': 6.3, 'segment_samples': 100,
+                'plane_I_permissible_g_mm': 1000.0, 'plane_II_permissible_g_mm': 1000.0,
+                'plane_I_g_mm': amount, 'plane_II_g_mm': 1.0, 'verdict_source': 'layout',
+                'analysed_at': analysed}
+    rows = [row(start, start + 5 * day, 500.0), row(start, start + 9 * day, 700.0),
+            row(start + day, start + 6 * day, 600.0)]
+    for order in (rows, rows[::-1]):
+        path = tmp_path / 'fleet.parquet'
+        pq.write_table(table(order, RESULT_SCHEMA), path)
+        series = read_series(path)['m1']
+        assert series['amount_I'].tolist() == [700.0, 600.0]
+        assert (series['t'] - start).tolist() == [0, day]
