@@ -315,3 +315,76 @@ def test_a_run_analysed_again_counts_by_its_latest_row(tmp_path):
         series = read_series(path)['m1']
         assert series['amount_I'].tolist() == [700.0, 600.0]
         assert (series['t'] - start).tolist() == [0, day]
+
+
+# -- bag: a recording cut at a chunk's end; samples before the first layout --------------
+
+def test_a_recording_cut_exactly_at_a_chunks_end_keeps_that_chunk(tmp_path):
+    """
+    Bug: a record ending exactly at the file's end taken as torn (``>`` -> ``>=``).
+
+    A bag from the project's writer (messages serialised by rosbags), cut right after its
+    third chunk record (its message indexes gone with the rest). The ``mcap`` library's
+    own stream reader gives the messages of the whole records; ours must give the same,
+    byte for byte, and say the recording is truncated. With the bug the third chunk's
+    messages were lost (206 messages whole; the bug kept 2 chunks' worth).
+    """
+    import io
+    import struct
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    from cvc_balance.bag.mcap_reader import Bag
+    from cvc_balance.bag.replay import replay
+    from independent import ramp, write_input_bag
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=3.0)
+    whole = write_input_bag(tmp_path / 'whole.mcap', stamps, angle, omega,
+                            [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    data = whole.read_bytes()
+    position, chunk_ends = 8, []
+    while position + 9 <= len(data):            # the top-level records, walked by hand
+        opcode, length = struct.unpack_from('<BQ', data, position)
+        position += 9 + length
+        if opcode == 0x06:
+            chunk_ends.append(position)
+    assert len(chunk_ends) >= 4
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[:chunk_ends[2]])
+    theirs, topics = [], {}
+    try:
+        for record in StreamReader(io.BytesIO(cut.read_bytes())).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message) and topics[record.channel_id] == '/joint_states':
+                theirs.append((record.log_time, bytes(record.data)))
+    except Exception as error:                  # the end of the cut file
+        assert type(error).__name__ == 'EndOfFile', error
+    bag = Bag(cut)
+    ours = bag.messages(bag.channel('/joint_states', 'sensor_msgs/msg/JointState'))
+    assert len(theirs) > 200 and ours == theirs
+    assert bag.problems == ['file has no end of data (truncated recording?)']
+    summary = replay(cut)
+    assert (summary.samples, summary.accepted) == (len(theirs), len(theirs))
+
+
+def test_a_sample_rejected_before_the_first_layout_is_not_also_dropped(tmp_path):
+    """
+    Bug: a sample rejected before the first layout counted as dropped too.
+
+    20 samples before the layout (log time), 2 of them not finite; 30 after, 1 of them
+    not finite. By hand: 47 good, 3 rejected; of the good, 18 before the layout are
+    dropped and 29 used; every sample counted once.
+    """
+    from cvc_balance.bag.replay import replay
+    from independent import ramp, write_input_bag
+    stamps, angle, omega = ramp(5.0, 0.0, rate=100.0, seconds=0.5)
+    omega = omega.copy()
+    omega[[3, 11, 33]] = math.nan
+    layout_at = int(stamps[20]) - 5_000_000
+    bag = write_input_bag(tmp_path / 'early.mcap', stamps, angle, omega,
+                          [(layout_at, yaml.safe_dump(GANTRY))])
+    summary = replay(bag)
+    assert (summary.samples, summary.rejected, summary.dropped, summary.accepted) == \
+        (50, 3, 18, 29)
+    assert summary.samples == summary.rejected + summary.dropped + summary.accepted
+    (segment,) = summary.segments
+    assert segment.samples == 29
