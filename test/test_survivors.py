@@ -388,3 +388,76 @@ def test_a_sample_rejected_before_the_first_layout_is_not_also_dropped(tmp_path)
     assert summary.samples == summary.rejected + summary.dropped + summary.accepted
     (segment,) = summary.segments
     assert segment.samples == 29
+
+
+# -- the verdict of record: when rotor and layout disagree -------------------------------
+
+def planes_by_hand(layout):
+    """Plane I and II unbalance (kg m, complex) of a layout's components (ISO 21940-2)."""
+    z_i, z_ii = layout['balancing']['planes']
+    planes = [0j, 0j]
+    for c in layout['components']:
+        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
+        planes[0] += u * (z_ii - c['z']) / (z_ii - z_i)
+        planes[1] += u * (c['z'] - z_i) / (z_ii - z_i)
+    return planes
+
+
+def shares_by_hand(layout):
+    """Each plane's permissible share (kg m) at the service speed (ISO 21940-11)."""
+    z_i, z_ii = layout['balancing']['planes']
+    mass = sum(c['mass'] for c in layout['components'])
+    z_com = sum(c['mass'] * c['z'] for c in layout['components']) / mass
+    u_per = layout['balancing']['grade'] * 1e-3 * mass / layout['balancing']['service_speed']
+    return [u_per * min(max(lever, 0.3), 0.7)
+            for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]
+
+
+def test_a_residual_beyond_residual_warn_raises_ok_to_warn():
+    """
+    Bug: a residual beyond ``residual_warn`` never raising OK to WARN.
+
+    The cells measure the declared gantry plus 0.6 of plane II's permissible share at right
+    angles to its unbalance (a point mass in plane II; exact, radius tiny). By hand: the
+    measured plane II is sqrt(0.352^2 + 0.6^2) = 0.696 of its share, plane I 0.397: the
+    measured rotor is OK (G 4.38, under 0.8 G); its residual, 0.6 of the share, is beyond
+    residual_warn = 0.5: the verdict of record is WARN, and says where.
+    """
+    from cvc_balance.identify.evidence import verdict_of_record
+    from cvc_balance.identify.fit import Estimate
+    model = RotorModel.from_layout(parse_layout(GANTRY))
+    declared, shares = planes_by_hand(GANTRY), shares_by_hand(GANTRY)
+    z_ii = GANTRY['balancing']['planes'][1]
+    extra = 0.6 * shares[1] * 1j * declared[1] / abs(declared[1])
+    s, p = aggregates_by_hand(GANTRY)
+    estimate = Estimate(s + extra, p + extra * z_ii, (0j, 0j), 1e-3, np.eye(2) * 1e-12, 1000,
+                        True)
+    fractions = [abs(declared[0]) / shares[0], abs(declared[1] + extra) / shares[1]]
+    grade = 6.3 * max(fractions)
+    assert grade < 0.8 * 6.3                    # by hand: the measured rotor alone is OK
+    verdict = verdict_of_record(model, estimate, top_speed=23.27)
+    assert verdict.source == 'measured' and verdict.measured.level == 'OK'
+    assert abs(verdict.equivalent_grade - grade) <= 1e-9 * grade, (verdict.equivalent_grade,
+                                                                    grade)
+    (plane,) = verdict.disagreements
+    assert plane.plane == 'II' and abs(plane.fraction - 0.6) < 1e-9
+    assert verdict.level == 'WARN'
+    assert verdict.headline.startswith('WARN: ') and 'the rotor is not what its layout says: ' \
+        'plane II' in verdict.text
+
+
+def test_a_residual_inside_its_own_95_percent_circle_is_no_disagreement():
+    """
+    Bug: warnings for residuals inside their own 95 % circle.
+
+    Rows by hand (plane, z, residual, its 95 % radius, permissible share), residual_warn
+    0.5: a residual differs only when beyond BOTH its radius and half its share.
+    """
+    from cvc_balance.identify.evidence import disagreeing
+    rows = [('I', -0.12, 0.030 + 0.040j, 0.060, 0.08),   # 0.05: beyond 0.04, inside 0.06
+            ('II', 0.12, 0.050j, 0.050, 0.08),            # exactly on its circle: inside
+            ('I', -0.12, -0.030, 0.010, 0.08),            # outside its circle, under 0.04
+            ('II', 0.12, 0.041, 0.040, 0.08)]             # beyond both
+    found = disagreeing(rows, residual_warn=0.5)
+    assert [(d.plane, d.residual, d.ci95) for d in found] == [('II', 0.041, 0.040)]
+    assert disagreeing(rows[:1], residual_warn=0.5) == ()
