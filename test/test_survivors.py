@@ -30,7 +30,8 @@ GANTRY = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
 # -- identify/live: the sliding fit ------------------------------------------------------
 
 def aggregates_by_hand(layout):
-    """S = sum m R e^{i theta} (kg m) and P = sum m R z e^{i theta} (kg m^2) of a layout.
+    """
+    Return S = sum m R e^{i theta} (kg m) and P = sum m R z e^{i theta} (kg m^2) by hand.
 
     Every body of config/ct_gantry.yaml has an axis along the rotor's Z (radial,
     tangential and axial own axes): no own products xz, yz.
@@ -246,7 +247,7 @@ def test_a_broken_link_gets_a_failure_row(tmp_path):
 
 
 def series_of(days, amounts, digests, permissible=1000.0):
-    """A machine's series as :func:`cvc_balance.fleet.trends.read_series` gives it."""
+    """Return a machine's series as :func:`cvc_balance.fleet.trends.read_series` gives it."""
     n = len(days)
     day_ns = 86_400 * 10**9
     return {'t': (1_760_000_000 * 10**9 + np.asarray(days) * day_ns).astype(np.int64),
@@ -437,8 +438,7 @@ def test_a_residual_beyond_residual_warn_raises_ok_to_warn():
     assert grade < 0.8 * 6.3                    # by hand: the measured rotor alone is OK
     verdict = verdict_of_record(model, estimate, top_speed=23.27)
     assert verdict.source == 'measured' and verdict.measured.level == 'OK'
-    assert abs(verdict.equivalent_grade - grade) <= 1e-9 * grade, (verdict.equivalent_grade,
-                                                                    grade)
+    assert abs(verdict.equivalent_grade - grade) <= 1e-9 * grade, verdict.equivalent_grade
     (plane,) = verdict.disagreements
     assert plane.plane == 'II' and abs(plane.fraction - 0.6) < 1e-9
     assert verdict.level == 'WARN'
