@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from cvc_balance.identify.live import SlidingFit
@@ -461,3 +462,53 @@ def test_a_residual_inside_its_own_95_percent_circle_is_no_disagreement():
     found = disagreeing(rows, residual_warn=0.5)
     assert [(d.plane, d.residual, d.ci95) for d in found] == [('II', 0.041, 0.040)]
     assert disagreeing(rows[:1], residual_warn=0.5) == ()
+
+
+# -- assertions that could not fail, made two-sided -------------------------------------
+
+def test_the_worst_case_is_its_bound_by_hand_not_just_above_every_draw():
+    """
+    The tolerance stack's worst case, to the bit of its definition, not only >= the draws.
+
+    Three point masses (no own products), each plane's bound by hand (design/stack.py's
+    description): |U_nominal| + sum_k max over the corners of the (m, R, z) box of
+    |f - f_0| + |f_0| 2 sin(t_theta / 2), with f = m R (z_II - z) / b in plane I and
+    m R (z - z_I) / b in plane II. And it is reached where it must be: one mass off by
+    its radius tolerance alone leaves exactly |U_nominal| + m t_R (its share).
+    """
+    import itertools
+    from cvc_balance.design.stack import analyse
+    from cvc_balance.design.tolerances import Tolerances
+    parts = [(2.0, 0.5, 30.0, -0.05), (3.0, 0.4, 200.0, 0.08), (1.5, 0.6, 300.0, 0.02)]
+    layout = {'name': 'three', 'components': [
+        {'name': f'p{k}', 'mass': m, 'radius': r, 'angle_deg': a, 'z': z}
+        for k, (m, r, a, z) in enumerate(parts)],
+        'supports': [{'name': 'front', 'z': -0.2}, {'name': 'rear', 'z': 0.2, 'axial': True}],
+        'balancing': {'planes': [-0.1, 0.1], 'correction_radius': 0.5}}
+    model = RotorModel.from_layout(parse_layout(layout))
+    t = np.array([[0.01, 0.002, math.radians(2.0), 0.003],
+                  [0.03, 0.001, math.radians(0.5), 0.001],
+                  [0.0, 0.004, math.radians(4.0), 0.0]])
+    result = analyse(model, Tolerances(t, np.zeros(3, bool)), 2000, seed=4)
+    z_i, z_ii = layout['balancing']['planes']
+    levers = (lambda z: (z_ii - z) / (z_ii - z_i), lambda z: (z - z_i) / (z_ii - z_i))
+    for plane, lever in zip(result.planes, levers):
+        nominal = abs(sum(m * r * lever(z) * cmath.exp(1j * math.radians(a))
+                          for m, r, a, z in parts))
+        bound = nominal
+        for (m, r, _, z), (tm, tr, ta, tz) in zip(parts, t):
+            f0 = m * r * lever(z)
+            bound += max(abs((m + sm * tm) * (r + sr * tr) * lever(z + sz * tz) - f0)
+                         for sm, sr, sz in itertools.product((-1, 1), repeat=3))
+            bound += abs(f0) * 2 * math.sin(ta / 2)
+        assert plane.worst_case == pytest.approx(bound, rel=1e-12), (plane.worst_case, bound)
+        assert plane.max_drawn <= plane.worst_case
+    # Reached: the radius of the second mass alone, at its tolerance.
+    only = np.zeros((3, 4))
+    only[1, 1] = 0.001
+    reached = analyse(model, Tolerances(only, np.zeros(3, bool)), 10, seed=4)
+    for plane, lever in zip(reached.planes, levers):
+        nominal = abs(sum(m * r * lever(z) * cmath.exp(1j * math.radians(a))
+                          for m, r, a, z in parts))
+        assert plane.worst_case == pytest.approx(nominal + 3.0 * 0.001 * abs(lever(0.08)),
+                                                 rel=1e-12)
