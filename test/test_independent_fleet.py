@@ -198,3 +198,159 @@ def test_the_residual_is_what_the_layout_misses(fleet):
                 off = vector(row, f'residual_plane_{p}_g_mm')
                 ci95 = row[f'residual_plane_{p}_g_mm_ci95'] * 1e-6
                 assert abs(off - missed[k]) <= 2 * ci95, (plan.machine_id, p, off, missed[k])
+
+
+# -- trends: the fitted line, its band and the date it leaves the grade, by hand ---------------
+
+DAY_NS = 86_400 * 10**9
+START_NS = 1_760_000_000 * 10**9
+
+
+def series(days, amounts, digests=None, permissible=1000.0, measured=None):
+    """Return one machine's series as read_series gives it (plane II absent)."""
+    n = len(days)
+    digests = ['d1'] * n if digests is None else digests
+    measured = np.zeros(n, bool) if measured is None else np.asarray(measured)
+    return {'t': (START_NS + np.asarray(days, float) * DAY_NS).astype(np.int64),
+            'layout_digest': np.array(digests, dtype=object),
+            'layout_name': np.array(['gantry'] * n, dtype=object), 'grade': np.full(n, 6.3),
+            'amount_I': np.asarray(amounts, float),
+            'ci95_I': np.where(measured, 30.0, np.nan),
+            'permissible_I': np.full(n, permissible), 'identified_I': measured,
+            'amount_II': np.full(n, np.nan), 'ci95_II': np.full(n, np.nan),
+            'permissible_II': np.full(n, permissible), 'identified_II': np.zeros(n, bool)}
+
+
+def first_day(values, limit):
+    """Index of the first value >= limit, None if none."""
+    above = [k for k, v in enumerate(values) if v >= limit]
+    return above[0] if above else None
+
+
+def test_a_drifting_plane_its_drift_band_and_the_day_it_leaves_by_hand():
+    """
+    One layout, a plane drifting ~4 g mm/day: the textbook straight line by hand.
+
+    b = S_td / S_tt, a = mean(U) - b mean(t), s^2 = sum r^2 / (n - 2), the drift's 95 %
+    half-width t_{0.975, n-2} s / sqrt(S_tt), the line's t s sqrt(1/n + (d - mean t)^2 /
+    S_tt); the day it reaches the permissible share (1000 g mm) counted on whole days from
+    the last run, and the band's days likewise.
+    """
+    from scipy import stats
+    from cvc_balance.fleet.trends import fit_machine, LEAVES
+    days = np.array([0.0, 11.0, 19.0, 33.0, 40.0, 52.0, 61.0, 75.0])
+    noise = np.array([9.0, -14.0, 6.0, 11.0, -17.0, 3.0, 8.0, -6.0])
+    amounts = 300.0 + 4.0 * days + noise
+    machine = fit_machine('m', series(days, amounts))
+    (plane,) = machine.planes
+    n, mean_t = len(days), days.mean()
+    s_tt = np.sum((days - mean_t) ** 2)
+    b = np.sum((days - mean_t) * (amounts - amounts.mean())) / s_tt
+    a = amounts.mean() - b * mean_t
+    s2 = np.sum((amounts - a - b * days) ** 2) / (n - 2)
+    t = stats.t.ppf(0.975, n - 2)
+    assert plane.drift == pytest.approx(b, rel=1e-12)
+    assert plane.drift_ci95 == pytest.approx(t * math.sqrt(s2 / s_tt), rel=1e-12)
+    assert plane.levels[0] == pytest.approx(a, rel=1e-12)
+    assert plane.now_fraction == pytest.approx((a + b * days[-1]) / 1000.0, rel=1e-12)
+    grid = days[-1] + np.arange(3651)
+    line = a + b * grid
+    half = t * np.sqrt(s2 * (1 / n + (grid - mean_t) ** 2 / s_tt))
+    leaves, earliest, latest = (first_day(line, 1000.0), first_day(line + half, 1000.0),
+                                first_day(line - half, 1000.0))
+    assert plane.status == LEAVES and machine.status == LEAVES
+    for got, want in ((plane.leaves, leaves), (plane.leaves_earliest, earliest),
+                      (plane.leaves_latest, latest)):
+        assert (got.timestamp() - START_NS / 1e9) / 86400.0 == grid[want], (got, want)
+    assert earliest < leaves < latest
+    assert plane.band([START_NS], 0)[0] == pytest.approx(
+        t * math.sqrt(s2 * (1 / n + mean_t ** 2 / s_tt)), rel=1e-12)
+
+
+def test_the_status_of_a_plane_out_stable_or_with_too_few_runs():
+    """OUT OF GRADE above its share now; no significant drift; too few runs: by hand."""
+    from cvc_balance.fleet.trends import fit_machine, FEW, OUT, STABLE
+    days = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    flat = np.array([500.0, 520.0, 480.0, 510.0, 490.0])       # drift 0 within its band
+    assert fit_machine('m', series(days, flat)).planes[0].status == STABLE
+    over = fit_machine('m', series(days, flat + 600.0))        # 1100 of 1000 now
+    assert over.planes[0].status == OUT and over.status == OUT
+    assert over.planes[0].now_fraction == pytest.approx(
+        (np.polyval(np.polyfit(days, flat + 600.0, 1), 40.0)) / 1000.0, rel=1e-12)
+    few = fit_machine('m', series(days[:2], flat[:2]))          # n - 2 = 0 dof
+    assert few.planes[0].status == FEW and few.status == FEW
+    assert few.planes[0].now_fraction == flat[1] / 1000.0
+    # Urgency: out of grade first, worst first; then by date; then the rest.
+    ranked = sorted([fit_machine('a', series(days, flat)), over,
+                     fit_machine('c', series(days, flat + 700.0))], key=lambda m: m.urgency)
+    assert [m.machine_id for m in ranked] == ['c', 'm', 'a']
+
+
+def test_trend_series_take_the_measured_plane_where_the_cells_could_tell(tmp_path):
+    """read_series: the identified plane where the verdict is measured, else the layout's."""
+    from cvc_balance.fleet.rows import RESULT_SCHEMA, table
+    from cvc_balance.fleet.trends import read_series
+    rows = []
+    for k, (source, samples, permissible) in enumerate(
+            (('measured', 100, 1000.0), ('layout', 100, 1000.0), ('measured', 0, 1000.0),
+             ('measured', 100, None))):
+        rows.append({'machine_id': 'm', 'segment_start': START_NS + k * DAY_NS,
+                     'layout_digest': 'd', 'layout_name': 'g', 'grade': 6.3,
+                     'segment_samples': samples, 'plane_I_permissible_g_mm': permissible,
+                     'plane_II_permissible_g_mm': permissible, 'plane_I_g_mm': 100.0 + k,
+                     'plane_II_g_mm': 200.0 + k, 'identified_plane_I_g_mm': 300.0 + k,
+                     'identified_plane_II_g_mm': 400.0 + k,
+                     'identified_plane_I_g_mm_ci95': 7.0, 'identified_plane_II_g_mm_ci95': 8.0,
+                     'verdict_source': source, 'analysed_at': START_NS})
+    rows.append(dict(rows[0], machine_id='other'))
+    path = tmp_path / 'fleet.parquet'
+    pq.write_table(table(rows, RESULT_SCHEMA), path)
+    both = read_series(path)
+    assert sorted(both) == ['m', 'other']
+    got = read_series(path, machine='m')['m']          # runs without samples or a share: out
+    assert got['amount_I'].tolist() == [300.0, 101.0]
+    assert got['amount_II'].tolist() == [400.0, 201.0]
+    assert got['identified_I'].tolist() == [True, False]
+    assert got['ci95_I'][0] == 7.0 and math.isnan(got['ci95_I'][1])
+    assert (got['t'] - START_NS).tolist() == [0, DAY_NS]
+
+
+# -- the tables: where they go, what is merged, what is refused ---------------------------------
+
+def test_the_tables_paths_merge_and_refusals(tmp_path):
+    """By hand: the failures' name, rows merged by (digest, bag), other files refused whole."""
+    import pyarrow as pa
+    from cvc_balance.fleet import store
+    from cvc_balance.fleet.rows import FAILURE_SCHEMA, table
+    assert store.failures_path(tmp_path / 'fleet.parquet') == tmp_path / 'fleet.failures.parquet'
+    assert store.failures_path(tmp_path / 'results') == tmp_path / 'results.failures.parquet'
+    assert store.lock_path(tmp_path / 'f.parquet') == tmp_path / 'f.parquet.lock'
+
+    def rows(*pairs):
+        return table([{'digest': d, 'bag': b, 'reason': 'r'} for d, b in pairs], FAILURE_SCHEMA)
+    current = rows(('d1', 'a'), ('d2', 'b'), ('d2', 'b2'))
+    added = rows(('d2', 'b'), ('d3', 'c'), ('d1', 'a'))
+    merged = store.merged(current, added)
+    assert list(zip(merged.column('digest').to_pylist(), merged.column('bag').to_pylist())) \
+        == [('d1', 'a'), ('d2', 'b'), ('d2', 'b2'), ('d3', 'c')]
+    retried = store.merged(current, added, dropped={'d1'})
+    assert list(zip(retried.column('digest').to_pylist(), retried.column('bag').to_pylist())) \
+        == [('d2', 'b'), ('d2', 'b2'), ('d3', 'c'), ('d1', 'a')]
+    # Written whole, read back equal; nothing left beside it.
+    path = tmp_path / 'failures.parquet'
+    store.write(path, merged)
+    assert store.read(path, FAILURE_SCHEMA).equals(merged)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['failures.parquet']
+    assert store.read(tmp_path / 'none.parquet', FAILURE_SCHEMA).num_rows == 0
+    # Not a table, another table, a folder: one line naming the file, nothing overwritten.
+    (tmp_path / 'text.parquet').write_text('not parquet')
+    pq.write_table(pa.table({'digest': ['x']}), tmp_path / 'other.parquet')
+    for name, says in (('text.parquet', 'not a readable Parquet table'),
+                       ('other.parquet', 'missing or different: bag (string)'),
+                       ('.', 'is a directory')):
+        with pytest.raises(ValueError) as caught:
+            store.read(tmp_path / name, FAILURE_SCHEMA)
+        message = str(caught.value)
+        assert says in message and '\n' not in message, message
+        assert message.startswith(str(tmp_path / name if name != '.' else tmp_path))
+    assert (tmp_path / 'text.parquet').read_text() == 'not parquet'
