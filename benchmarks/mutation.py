@@ -34,8 +34,11 @@ PHYSICS = ['test/test_pinocchio.py', 'test/test_thesis.py', 'test/test_edge_case
 """Fast and independent: Pinocchio, the thesis, the 40-digit reference. The hypothesis
 properties, the model choice's replays and the whole pipelines (rerun, the node) are left
 out: a surviving mutant runs every selected test, and those took minutes each."""
-FLEET = ['test/test_survivors.py', 'test/test_independent_fleet.py', 'test/test_fleet.py']
-"""The fleet's tests: by hand, against the simulation's per-bag truths, and the fleet run."""
+FLEET = ['test/test_survivors.py', 'test/test_independent_fleet.py', 'test/test_data_loss.py',
+         'test/test_charts.py']
+"""The fleet's tests: by hand and against the simulation's per-bag truths. Not
+test/test_fleet.py: its module fixture (100 bags through a Dask LocalCluster, ~20 s) is
+made again for every mutant."""
 MODULES = {
     # name: (module file, tests that guard it)
     'engine': ('cvc_balance/physics/engine.py', PHYSICS),
