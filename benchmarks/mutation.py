@@ -89,6 +89,12 @@ MODULES = {
                          ['test/test_field.py', 'test/test_field_checks.py']),
     'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
     # Issue 29: the modules the earlier runs skipped or stopped, and the new ones.
+    'limits': ('cvc_balance/physics/limits.py',
+               ['test/test_validation_limits.py', 'test/test_layout_columns.py',
+                'test/test_layout_messages.py']),
+    'documents': ('cvc_balance/physics/documents.py',
+                  ['test/test_validation_limits.py', 'test/test_layout_columns.py',
+                   'test/test_hostile_layouts.py']),
     'keyphasor': ('cvc_balance/physics/keyphasor.py',
                   ['test/test_keyphasor.py', 'test/test_readings.py']),
     'identify_evidence': ('cvc_balance/identify/evidence.py',
