@@ -85,7 +85,7 @@ def test_a_sample_without_a_finite_time_or_value_is_left_out():
 # -- checking the marks ----------------------------------------------------------------------
 
 def neighbours_median_by_hand(periods, neighbours):
-    """The median of up to ``neighbours`` periods either side, the ends reflected."""
+    """Return the median of up to ``neighbours`` periods either side, the ends reflected."""
     n = len(periods)
     if n < 2:
         return list(periods)
@@ -249,7 +249,7 @@ def test_angle_speed_and_acceleration_between_marks_by_hand():
 # -- steady stretches ---------------------------------------------------------------------------
 
 def stepped_marks(steps):
-    """Marks of constant speeds: [(revolutions, period s)] one after the other."""
+    """Return the marks of constant speeds: [(revolutions, period s)] one after the other."""
     periods = np.concatenate([np.full(n, period) for n, period in steps])
     return Marks(np.concatenate([[0.0], np.cumsum(periods)]), np.ones(len(periods), bool),
                  len(periods) + 1)
@@ -257,9 +257,11 @@ def stepped_marks(steps):
 
 def test_steady_stretches_of_a_speed_step_by_hand():
     """
-    15 revolutions at 0.1 s, then 14 at 0.1 / 1.5 s: each mark's speed is averaged over 8
-    revolutions centred on it, so the marks within 4 of the step blend (3 % off and more):
-    the first stretch is marks 0-11, the second 19-29, each at its exact speed.
+    Split a speed step: 15 revolutions at 0.1 s, then 14 at 0.1 / 1.5 s.
+
+    Each mark's speed is averaged over 8 revolutions centred on it, so the marks within 4
+    of the step blend (3 % off and more): the first stretch is marks 0-11, the second
+    19-29, each at its exact speed.
     """
     marks = stepped_marks([(15, 0.1), (14, 0.1 / 1.5)])
     slow, fast = steady_stretches(marks)
