@@ -90,7 +90,8 @@ MODULES = {
     'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
     # Issue 29: the modules the earlier runs skipped or stopped, and the new ones.
     'limits': ('cvc_balance/physics/limits.py',
-               ['test/test_validation_limits.py', 'test/test_layout_columns.py',
+               ['test/test_independent_limits.py', 'test/test_validation_limits.py',
+                'test/test_layout_columns.py',
                 'test/test_layout_messages.py']),
     'documents': ('cvc_balance/physics/documents.py',
                   ['test/test_validation_limits.py', 'test/test_layout_columns.py',

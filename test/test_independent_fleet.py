@@ -354,3 +354,19 @@ def test_the_tables_paths_merge_and_refusals(tmp_path):
         assert says in message and '\n' not in message, message
         assert message.startswith(str(tmp_path / name if name != '.' else tmp_path))
     assert (tmp_path / 'text.parquet').read_text() == 'not parquet'
+
+
+def test_bags_found_once_in_name_order_hidden_folders_skipped(tmp_path):
+    """A file and a folder given (the file also inside it, and linked): each bag once."""
+    from cvc_balance.fleet import find_bags
+    runs = tmp_path / 'runs'
+    (runs / '.cache').mkdir(parents=True)
+    (runs / '.cache' / 'old.mcap').write_bytes(b'x')
+    (runs / 'b.mcap').write_bytes(b'x')
+    (runs / 'a.db3').write_bytes(b'x')
+    (runs / 'link.mcap').symlink_to(runs / 'b.mcap')
+    found = find_bags([runs / 'b.mcap', runs, runs / 'b.mcap'])
+    assert found == [(runs / 'b.mcap', runs), (runs / 'a.db3', runs)]
+    with pytest.raises(FileNotFoundError) as caught:
+        find_bags([runs, tmp_path / 'nowhere'])
+    assert str(caught.value) == f'{tmp_path / "nowhere"}: no such file or directory'
