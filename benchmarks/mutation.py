@@ -34,6 +34,11 @@ PHYSICS = ['test/test_pinocchio.py', 'test/test_thesis.py', 'test/test_edge_case
 """Fast and independent: Pinocchio, the thesis, the 40-digit reference. The hypothesis
 properties, the model choice's replays and the whole pipelines (rerun, the node) are left
 out: a surviving mutant runs every selected test, and those took minutes each."""
+FLEET = ['test/test_survivors.py', 'test/test_independent_fleet.py', 'test/test_data_loss.py',
+         'test/test_charts.py']
+"""The fleet's tests: by hand and against the simulation's per-bag truths. Not
+test/test_fleet.py: its module fixture (100 bags through a Dask LocalCluster, ~20 s) is
+made again for every mutant."""
 MODULES = {
     # name: (module file, tests that guard it)
     'engine': ('cvc_balance/physics/engine.py', PHYSICS),
@@ -48,7 +53,8 @@ MODULES = {
                      'test/test_layout.py']),
     'inertia': ('cvc_balance/physics/inertia.py', PHYSICS + ['test/test_stability.py']),
     'compensated': ('cvc_balance/physics/compensated.py',
-                    ['test/test_stability.py', 'test/test_pinocchio.py']),
+                    ['test/test_independent_compensated.py', 'test/test_compensated.py',
+                     'test/test_stability.py', 'test/test_pinocchio.py']),
     'motion': ('cvc_balance/physics/motion.py',
                ['test/test_motion.py', 'test/test_stamp_gate.py', 'test/test_edge_cases.py']),
     'unbalance': ('cvc_balance/physics/unbalance.py',
@@ -62,11 +68,14 @@ MODULES = {
                     'test/test_layout_messages.py']),
     'model_choice': ('cvc_balance/physics/model_choice.py',
                      ['test/test_model_choice.py', 'test/test_edge_cases.py']),
-    'replay': ('cvc_balance/bag/replay.py', ['test/test_bags.py', 'test/test_edge_cases.py']),
+    'replay': ('cvc_balance/bag/replay.py',
+               ['test/test_survivors.py', 'test/test_bags.py', 'test/test_edge_cases.py']),
     'mcap_writer': ('cvc_balance/bag/mcap_writer.py',
-                    ['test/test_bags.py', 'test/test_edge_cases.py']),
+                    ['test/test_mcap_conformance.py', 'test/test_bags.py',
+                     'test/test_edge_cases.py']),
     'mcap_reader': ('cvc_balance/bag/mcap_reader.py',
-                    ['test/test_bags.py', 'test/test_edge_cases.py']),
+                    ['test/test_survivors.py', 'test/test_mcap_conformance.py',
+                     'test/test_reindex.py', 'test/test_bags.py', 'test/test_edge_cases.py']),
     'scenario': ('cvc_balance/bag/scenario.py', ['test/test_bags.py']),
     'cdr': ('cvc_balance/messages/cdr.py',
             ['test/test_cdr.py', 'test/test_edge_cases.py', 'test/test_bags.py']),
@@ -79,6 +88,31 @@ MODULES = {
     'field_correction': ('cvc_balance/field/correction.py',
                          ['test/test_field.py', 'test/test_field_checks.py']),
     'design_sensitivity': ('cvc_balance/design/sensitivity.py', ['test/test_design.py']),
+    # Issue 29: the modules the earlier runs skipped or stopped, and the new ones.
+    'limits': ('cvc_balance/physics/limits.py',
+               ['test/test_independent_limits.py', 'test/test_validation_limits.py',
+                'test/test_layout_columns.py',
+                'test/test_layout_messages.py']),
+    'documents': ('cvc_balance/physics/documents.py',
+                  ['test/test_validation_limits.py', 'test/test_layout_columns.py',
+                   'test/test_hostile_layouts.py']),
+    'keyphasor': ('cvc_balance/physics/keyphasor.py',
+                  ['test/test_independent_keyphasor.py', 'test/test_keyphasor.py']),
+    'identify_evidence': ('cvc_balance/identify/evidence.py',
+                          ['test/test_survivors.py', 'test/test_evidence.py',
+                           'test/test_verdict_units.py']),
+    'identify_mistakes': ('cvc_balance/identify/mistakes.py',
+                          ['test/test_input_mistakes.py', 'test/test_field_mistakes.py']),
+    'identify_live': ('cvc_balance/identify/live.py',
+                      ['test/test_survivors.py', 'test/test_identify.py']),
+    'field_plan': ('cvc_balance/field/plan.py',
+                   ['test/test_survivors.py', 'test/test_field.py', 'test/test_field_plans.py']),
+    'field_model_check': ('cvc_balance/field/model_check.py',
+                          ['test/test_field_mistakes.py', 'test/test_field_procedure.py']),
+    'field_search': ('cvc_balance/field/search.py', ['test/test_field_plans.py']),
+    **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
+       for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
+                    'simulate', 'charts')},
 }
 DESELECT = [
     # Tests that start ROS processes or the rerun viewer: slow, and they reach the

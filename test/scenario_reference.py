@@ -1,16 +1,16 @@
 """
-What a bundled bag's outputs must be, from its scenario, through the engine alone.
+What a bundled bag's outputs must be, from its scenario, through Pinocchio.
 
-Independent of the replay's reading and vectorised alpha: the scenario regenerates the
-samples, the live estimator (plain floats) gives alpha, and the engine's one-sample path
-gives every output.
+Independent of the replay's reading, its vectorised alpha and cvc_balance's physics: the
+scenario regenerates the samples, the live estimator (plain floats, the node's) gives
+alpha, and Pinocchio's RNEA of the layout in force gives every output, the support loads
+split by statics and the unbalance from Pinocchio's mass properties
+(:class:`independent.PinocchioRotor`).
 """
 
 from cvc_balance.bag.scenario import load_scenario
-from cvc_balance.physics.engine import RotorModel, sample_loads
-from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.motion import AccelerationEstimator
-from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance
+from independent import PinocchioRotor
 
 
 def expected_outputs(scenario_file):
@@ -18,20 +18,20 @@ def expected_outputs(scenario_file):
     scenario = load_scenario(scenario_file)
     stamps = scenario.stamps_ns()
     angle, omega = scenario.measured()
-    models = [(round((scenario.start + at - 0.5 / scenario.rate) * 1e9),
-               RotorModel.from_layout(parse_layout(m))) for at, m in scenario.layouts]
+    rotors = [(round((scenario.start + at - 0.5 / scenario.rate) * 1e9), PinocchioRotor(m))
+              for at, m in scenario.layouts]
     estimator = AccelerationEstimator(0.1)
     expected, motion = {}, {}
     for ns, q, w in zip(stamps.tolist(), angle, omega):
         alpha = estimator.update(ns * 1e-9, w)
-        model = [m for t, m in models if t <= ns][-1]
-        result = sample_loads(model, q, w, alpha)
-        (u_x, u_y), (p_xz, p_yz) = static_unbalance(model), couple_unbalance(model)
+        rotor = [r for t, r in rotors if t <= ns][-1]
+        ref = rotor.loads(float(q), float(w), alpha)
+        force, torque = rotor.unbalance(float(w))
         expected[ns] = {
-            '/bearing_load': list(result.force_stator) + list(result.moment_stator),
-            '/unbalance': [w * w * u_x, w * w * u_y, 0, -w * w * p_yz, w * w * p_xz, 0],
-            '/drive_torque': [0, 0, 0, 0, 0, result.drive_torque]}
-        for name, (force, moment) in result.supports.items():
+            '/bearing_load': list(ref['force']) + list(ref['moment']),
+            '/unbalance': list(force) + list(torque),
+            '/drive_torque': [0, 0, 0, 0, 0, ref['drive_torque']]}
+        for name, (force, moment) in ref['supports'].items():
             expected[ns][f'/supports/{name}/load'] = list(force) + list(moment)
         motion[ns] = (q, w, alpha)
     return expected, motion

@@ -1,9 +1,10 @@
 """
 The balance_monitor node as its own process, driven by a probe node.
 
-Every output topic is checked against the engine (to 5e-11 relative), across a
-layout change mid-run, a rejected layout and bad messages interleaved; the
-diagnostics go from OK to ERROR and back; a noisy encoder does not make
+Every output topic is checked against Pinocchio's RNEA and mass properties, the
+support loads against its load split by statics (test/independent.py; to 5e-11
+relative), across a layout change mid-run, a rejected layout and bad messages
+interleaved; the diagnostics go from OK to ERROR and back; a noisy encoder does not make
 drive-torque spikes; SIGINT and SIGTERM end the node cleanly.
 """
 
@@ -21,16 +22,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 import yaml
 
-from cvc_balance.physics.engine import RotorModel, sample_loads
 from cvc_balance.physics.layout_file import layout_from_text
-from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance
+from independent import PinocchioRotor
 from reference import relative_error
 from ros_harness import NodeProcess, Probe
 
 TOLERANCE = 5e-11
-"""Relative error of each output against the engine: measured 9.6e-12 at most (the drive
-torque, alpha estimated by the node on a ramp against the ramp's exact alpha); 0 for the
-speed-only unbalance. Against Pinocchio: test_pipeline_reference.py."""
+"""Relative error of each output against Pinocchio: measured 2.7e-11 at most (the drive
+torque, alpha estimated by the node on a ramp against the ramp's exact alpha); the loads
+1.1e-14, the unbalance 2.2e-16."""
 LAYOUT_A = {
     'name': 'layout_a', 'gravity': [0.0, -9.80665 * math.cos(0.3), 9.80665 * math.sin(0.3)],
     'components': [
@@ -81,15 +81,13 @@ def wait_for_diagnostics(probe, predicate, timeout=10.0):
     return probe.spin_until(seen, timeout)
 
 
-def expected_outputs(model, angle, omega, alpha):
-    """Each output topic's (force, torque) for one sample, from the engine."""
-    result = sample_loads(model, angle, omega, alpha)
-    (u_x, u_y), (p_xz, p_yz) = static_unbalance(model), couple_unbalance(model)
-    w2 = omega * omega
-    outputs = {'bearing_load': (result.force_stator, result.moment_stator),
-               'unbalance': ((w2 * u_x, w2 * u_y, 0.0), (-w2 * p_yz, w2 * p_xz, 0.0)),
-               'drive_torque': ((0.0, 0.0, 0.0), (0.0, 0.0, result.drive_torque))}
-    for name, load in result.supports.items():
+def expected_outputs(rotor, angle, omega, alpha):
+    """Each output topic's (force, torque) for one sample, from Pinocchio (a PinocchioRotor)."""
+    ref = rotor.loads(angle, omega, alpha)
+    outputs = {'bearing_load': (ref['force'], ref['moment']),
+               'unbalance': rotor.unbalance(omega),
+               'drive_torque': ((0.0, 0.0, 0.0), (0.0, 0.0, ref['drive_torque']))}
+    for name, load in ref['supports'].items():
         outputs[f'supports/{name}/load'] = load
     return outputs
 
@@ -135,8 +133,8 @@ def test_outputs_match_the_engine_through_layout_change_and_bad_input(probe, tmp
     joints = probe.publisher(JointState, 'joint_states', sensor=True)
     layouts = probe.publisher(String, 'layout', latched=True)
     wait_until_connected(probe, node, 'joint_states', 'layout')
-    model_a = RotorModel.from_layout(layout_from_text(yaml.safe_dump(LAYOUT_A)))
-    model_b = RotorModel.from_layout(layout_from_text(yaml.safe_dump(LAYOUT_B)))
+    model_a, model_b = PinocchioRotor(LAYOUT_A), PinocchioRotor(LAYOUT_B)
+    digest_b = layout_from_text(yaml.safe_dump(LAYOUT_B)).digest()
     alpha = 0.75
     start_ns, step_ns = 10_000_000_000, 2_000_000
     good = {}          # stamp ns -> (model, angle, omega, alpha)
@@ -180,7 +178,6 @@ def test_outputs_match_the_engine_through_layout_change_and_bad_input(probe, tmp
 
     # A new layout, then one that must be rejected: B stays in force.
     layouts.publish(String(data=yaml.safe_dump(LAYOUT_B)))
-    digest_b = model_b.layout.digest()
     assert wait_for_diagnostics(probe, lambda s, v: v.get('layout digest') == digest_b), \
         node.log()
     broken = dict(LAYOUT_B, components=[dict(LAYOUT_B['components'][1], mass=-5.0)])
@@ -261,7 +258,8 @@ def test_noisy_encoder_makes_no_drive_torque_spikes(probe, tmp_path):
         probe.spin_for(0.002)
     assert probe.spin_until(lambda: len(probe.received['drive_torque']) >= 990), node.log()
     torque = np.array([m.wrench.torque.z for m in probe.received['drive_torque']])
-    i_zz = RotorModel.from_layout(layout_from_text(yaml.safe_dump(layout))).i_zz
+    mass, com, inertia = PinocchioRotor(layout).mass_properties()
+    i_zz = inertia[2, 2] + mass * (com[0] ** 2 + com[1] ** 2)      # about the axis
     raw_rms = i_zz * sigma * math.sqrt(2.0) / dt
     settled = torque[200:]          # past four time constants of 0.1 s
     assert np.sqrt(np.mean(settled**2)) < 0.01 * raw_rms
@@ -275,12 +273,11 @@ def test_speed_only_input(probe, tmp_path):
     node = start_node(tmp_path, layout)
     speeds = probe.publisher(Float64, 'speed', sensor=True)
     wait_until_connected(probe, node, 'speed')
-    model = RotorModel.from_layout(layout_from_text(yaml.safe_dump(layout)))
     for k in range(50):
         speeds.publish(Float64(data=15.0))
         probe.spin_for(0.004)
     assert probe.spin_until(lambda: len(probe.received['unbalance']) == 50), node.log()
-    expected = expected_outputs(model, 0.0, 15.0, 0.0)
+    expected = expected_outputs(PinocchioRotor(layout), 0.0, 15.0, 0.0)
     for msg in probe.received['unbalance']:
         got = (vector(msg.wrench.force), vector(msg.wrench.torque))
         assert relative_error(got, expected['unbalance']) < TOLERANCE

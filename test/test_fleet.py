@@ -19,6 +19,7 @@ import io
 import json
 import math
 from pathlib import Path
+import re
 import shutil
 import signal
 import struct
@@ -222,7 +223,7 @@ def test_trends_see_the_tube_swap_as_a_step_not_a_drift(fleet):
     trends = {t.machine_id: t for t in machine_trends(fleet['results'])}
     layout = yaml.safe_load(LAYOUT.read_text())
     planes = layout['balancing']['planes']
-    inside = checked = 0
+    inside = checked = still = 0
     for plan in fleet['plans']:
         if plan.kind != 'tube swap':
             continue
@@ -240,9 +241,12 @@ def test_trends_see_the_tube_swap_as_a_step_not_a_drift(fleet):
             step, half = change.steps[p]
             checked += 1
             inside += abs(step - true_step) <= half
+            # No drift put in: 0 within the drift's 95 % interval (binomially, 95 % each;
+            # measured 9 of 10, the interval 22 to 114 g mm/day).
             fitted = next(t for t in machine.planes if t.plane == p)
-            assert abs(fitted.drift) <= fitted.drift_ci95 + 15.0     # g mm/day: no drift
+            still += abs(fitted.drift) <= fitted.drift_ci95
     assert inside >= checked - 1, (inside, checked)
+    assert still >= checked - 1, (still, checked)
 
 
 def test_a_second_run_adds_only_new_bags(fleet, tmp_path):
@@ -256,8 +260,10 @@ def test_a_second_run_adds_only_new_bags(fleet, tmp_path):
     code, out, err = run_cli('fleet', fleet['root'], more, '--out', results, '--engine',
                              'local', '--no-progress')
     assert code == 0, err
-    assert '3 analysed' in out and f'{MACHINES * RUNS} already in' in out
-    assert '2 failed before' in out
+    first = out.splitlines()[0]
+    assert re.fullmatch(rf'{MACHINES * RUNS + 5} bags found: 3 analysed \(3 rows, \d+ samples\), '
+                        rf'{MACHINES * RUNS} already in {re.escape(str(results))}, 0 failed, '
+                        r'2 failed before \(not retried: --retry-failures\)', first), first
     after = pq.read_table(results)
     assert after.num_rows == before.num_rows + 3
     assert after.slice(0, before.num_rows).equals(before)
@@ -268,7 +274,11 @@ def test_a_second_run_adds_only_new_bags(fleet, tmp_path):
     shutil.copytree(more, copied)
     code, out, err = run_cli('fleet', fleet['root'], more, copied, '--out', results,
                              '--engine', 'local', '--no-progress')
-    assert code == 0 and '0 analysed' in out and '3 duplicates' not in out, out
+    assert code == 0, err
+    first = out.splitlines()[0]
+    assert re.fullmatch(rf'{MACHINES * RUNS + 8} bags found: 0 analysed \(0 rows, 0 samples\), '
+                        rf'{MACHINES * RUNS + 6} already in {re.escape(str(results))}, 0 failed, '
+                        r'2 failed before \(not retried: --retry-failures\)', first), first
     assert pq.read_table(results).equals(after)
     # Retrying failures replaces their rows, never doubles them.
     code, out, err = run_cli('fleet', fleet['root'], '--out', results, '--engine', 'local',

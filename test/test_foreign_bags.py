@@ -8,8 +8,9 @@ run split over three files), its CDR made by rosbags' serialiser or mcap-ros2's 
 the project's). Each is replayed and its outputs, read back with the ``mcap`` library's reader
 (CRCs validated) and rosbags' deserialiser, are compared with
 
-* the engine: ``scenario_reference`` (the scenario's known motion, the live alpha estimator and
-  the engine's one-sample path; independent of the bag reading and the vectorised replay), and
+* Pinocchio: ``scenario_reference`` (the scenario's known motion, the live alpha estimator and
+  Pinocchio's RNEA of each layout; independent of the bag reading, the vectorised replay
+  and cvc_balance's physics), and
 * the replay of the project's own bag of the same run: equal to the last bit.
 
 Also: JointStates with several joints and a second publisher on the topic, namespaced topics
@@ -48,9 +49,10 @@ STORE = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE, STRING = 'sensor_msgs/msg/JointState', 'std_msgs/msg/String'
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 TOLERANCE = 1e-12
-"""Outputs against the engine, relative to each output's peak (measured: at most 2.3e-13,
-the drive torque, whose alpha goes through two implementations of the estimator; loads
-and unbalance 2e-16 or 0)."""
+"""Outputs against Pinocchio, relative to each output's peak (measured: at most 2.3e-13,
+the drive torque, whose alpha goes through two implementations of the estimator; the
+unbalance 7.3e-14, Pinocchio's centre of mass S / m of a near-balanced rotor; loads
+1.4e-15)."""
 
 
 @dataclass
@@ -257,7 +259,7 @@ def run():
 
 
 def assert_outputs(path, reference, errors=None):
-    """Check that the outputs at ``path`` equal the engine's (TOLERANCE) and the own bag's."""
+    """Check that the outputs at ``path`` equal Pinocchio's (TOLERANCE) and the own bag's."""
     engine, own = reference
     got = read_outputs(path)
     assert got.keys() == engine.keys() == own.keys()

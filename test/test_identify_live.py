@@ -56,6 +56,8 @@ def test_node_identifies_the_hidden_bracket_and_warns(tmp_path):
     residual = got['/unbalance_residual']
     identified = got['/identified_unbalance']
     assert len(residual) == len(identified) > 10
+    # Rotor-frame vectors, stamped so (the node's default rotor_frame).
+    assert {msg.header.frame_id for _, msg in residual + identified} == {'rotor'}
     # Diagnostics: the measured status, with the node's radius for the static residual.
     # Each measured status with the digest of the layout in force (the main status's).
     measured = [({kv.key: kv.value for kv in msg.status[0].values}['layout digest'], s)

@@ -2,7 +2,7 @@
 The rerun view of a bag, read back with rerun's own reader (rerun.chunk.RrdReader).
 
 Entity paths for the 3D scene, plots, polar views and text exist; logged values equal
-the engine's (scenario_reference) at sampled times; the per-plane fractions, the support
+Pinocchio's (scenario_reference) at sampled times; the per-plane fractions, the support
 loads' static and rotating parts and the verdict lanes equal what is computed here by
 hand from the layout (ISO 21940-2's two-plane split, ISO 21940-11's U_per).
 """

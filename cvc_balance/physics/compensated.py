@@ -106,11 +106,12 @@ def negate(x):
 
 
 def power_of_two_above(value):
-    """Smallest power of two >= ``value`` (a float >= 0; 0 gives 0)."""
+    """Smallest power of two >= ``value`` (a float >= 0; 0 gives 0; inf beyond 2^1023)."""
     if value <= 0.0:
         return 0.0
     mantissa, exponent = math.frexp(value)
-    return math.ldexp(1.0, exponent - 1 if mantissa == 0.5 else exponent)
+    exponent = exponent - 1 if mantissa == 0.5 else exponent
+    return math.ldexp(1.0, exponent) if exponent < 1024 else math.inf
 
 
 def total(x):

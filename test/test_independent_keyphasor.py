@@ -1,0 +1,305 @@
+"""
+The tach core (cvc_balance/physics/keyphasor.py) on small signals and mark lists worked by hand.
+
+Each expected value is counted or computed here from the definitions in the module's
+description: the two levels as medians, a crossing timed by linear interpolation, a band
+that must be left on both sides, periods checked against the median of their neighbours
+(the ends reflected), marks put back evenly, an extra mark dropped, the speed at a mark
+the mean over the revolutions centred on it, the angle 2 pi k at mark k and linear between,
+steady stretches as runs of marks whose speeds stay within the tolerance. Exact binary
+fractions put values on the boundaries the module names (a tolerance of 0.25).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from cvc_balance.physics.keyphasor import (_longest_run, _neighbours_median, checked_marks,
+                                           Marks, signal_levels, signal_marks,
+                                           steady_stretches)
+
+TWO_PI = 2 * math.pi
+
+
+# -- the signal's levels and its crossings --------------------------------------------------
+
+def test_the_two_levels_are_the_medians_either_side_of_the_middle():
+    # Middle 2: 0, 1 and 2 are the low side (median 1), 4 the high one.
+    assert signal_levels([0.0, 1.0, 2.0, 4.0]) == (1.0, 4.0)
+    # Middle 15.5 (not 0.5 / 31): 10, 11 low; 20, 21 high.
+    assert signal_levels([10.0, 20.0, 11.0, 21.0, math.nan]) == (10.5, 20.5)
+    assert signal_levels([0.0, 1.0]) == (0.0, 1.0)                  # two samples suffice
+    for values, says in (([1.0, math.nan], 'tach signal has 1 finite samples: no marks'),
+                         ([], 'tach signal has 0 finite samples: no marks'),
+                         ([2.0, 2.0, 2.0], 'tach signal is flat at 2: no marks')):
+        with pytest.raises(ValueError) as caught:
+            signal_levels(values)
+        assert str(caught.value) == says
+
+
+def test_crossings_by_linear_interpolation_either_edge():
+    t = np.arange(9.0)
+    values = np.array([0.0, 0.0, 0.25, 1.0, 1.0, 0.0, 0.0, 0.75, 1.0])
+    # Threshold 0.5: rising between 0.25 (t 2) and 1 (t 3), and between 0 (t 6) and 0.75.
+    assert signal_marks(t, values).tolist() == [2.0 + 1.0 / 3.0, 6.0 + 2.0 / 3.0]
+    # Falling: between 1 (t 4) and 0 (t 5), halfway.
+    assert signal_marks(t, values, 'falling').tolist() == [4.5]
+    # A threshold given: 0.25 rising is crossed exactly at t 2 and between t 6 and 7.
+    assert signal_marks(t, values, threshold=0.25).tolist() == [2.0, 6.0 + 1.0 / 3.0]
+    for kwargs, says in (({'edge': 'up'}, "keyphasor edge must be rising or falling, got 'up'"),
+                         ({'threshold': math.nan}, 'keyphasor threshold must be finite, got '
+                          'nan')):
+        with pytest.raises(ValueError) as caught:
+            signal_marks(t, values, **kwargs)
+        assert str(caught.value) == says
+
+
+def test_a_wiggle_counts_only_beyond_the_band_on_both_sides():
+    """Levels 1 and 6 (band 0.1 x 5 = 0.5 about 3.5): 4.1 and 2.9 leave it, 4.0, 3.0 do not."""
+    t = np.arange(8.0)
+    beyond = np.array([1.0, 1.0, 4.1, 2.9, 6.0, 6.0, 1.0, 1.0])
+    marks = signal_marks(t, beyond)
+    np.testing.assert_allclose(marks, [1.0 + 2.5 / 3.1, 3.0 + 0.6 / 3.1], rtol=0, atol=1e-15)
+    # Exactly 0.5 off is not beyond: one edge, at 6.0, timed after the last sample below.
+    on_the_band = np.array([1.0, 1.0, 4.0, 3.0, 6.0, 6.0, 1.0, 1.0])
+    assert signal_marks(t, on_the_band).tolist() == [3.0 + 0.5 / 3.0]
+
+
+def test_a_sample_without_a_finite_time_or_value_is_left_out():
+    t = np.arange(10.0)
+    values = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0])
+    clean = signal_marks(t, values)
+    for k in (2, 3, 7):
+        t_gap, v_gap = t.copy(), values.copy()
+        t_gap[k] = math.nan
+        kept = np.arange(10) != k
+        assert signal_marks(t_gap, values).tolist() == signal_marks(t[kept], values[kept]) \
+            .tolist(), k
+        v_gap[k] = math.nan
+        assert signal_marks(t, v_gap).tolist() == signal_marks(t[kept], values[kept]) \
+            .tolist(), k
+    assert clean.tolist() == [2.5, 7.5]
+
+
+# -- checking the marks ----------------------------------------------------------------------
+
+def neighbours_median_by_hand(periods, neighbours):
+    """Return the median of up to ``neighbours`` periods either side, the ends reflected."""
+    n = len(periods)
+    if n < 2:
+        return list(periods)
+    reach = min(neighbours, n - 1)
+
+    def at(j):                            # reflect about the end elements
+        return periods[-j] if j < 0 else periods[2 * (n - 1) - j] if j >= n else periods[j]
+    out = []
+    for i in range(n):
+        around = sorted(at(j) for j in range(i - reach, i + reach + 1) if j != i)
+        out.append(0.5 * (around[reach - 1] + around[reach]))
+    return out
+
+
+@pytest.mark.parametrize('periods', [[1.0], [1.0, 3.0], [1.0, 2.0, 7.0], [4.0, 1.0, 3.0, 2.0],
+                                     [5.0, 1.0, 4.0, 2.0, 3.0, 9.0, 6.0, 8.0]])
+@pytest.mark.parametrize('neighbours', [1, 2, 3])
+def test_neighbours_median_by_hand(periods, neighbours):
+    got = _neighbours_median(np.array(periods), neighbours)
+    assert got.tolist() == neighbours_median_by_hand(periods, neighbours)
+
+
+def test_few_marks_are_taken_as_they_are():
+    for times in ([], [3.0], [math.nan, 2.0]):
+        marks = checked_marks(times)
+        assert marks.found == len([t for t in times if math.isfinite(t)])
+        assert marks.good.shape == (max(marks.found - 1, 0),) and marks.good.dtype == bool
+        assert marks.time.tolist() == [t for t in times if math.isfinite(t)]
+    two = checked_marks([1.0, 0.0])                            # sorted
+    assert two.time.tolist() == [0.0, 1.0] and two.good.tolist() == [True] and two.found == 2
+    three = checked_marks([0.0, 1.0, 2.0])
+    assert three.good.tolist() == [True, True] and three.revolutions == 2
+
+
+def test_a_doubled_mark_is_dropped_even_in_the_first_period():
+    for extra_at in (0.4, 3.4, 6.7):
+        times = sorted([float(k) for k in range(8)] + [extra_at])
+        marks = checked_marks(times)
+        assert marks.time.tolist() == [float(k) for k in range(8)], extra_at
+        assert (marks.found, marks.doubled, marks.missed, marks.irregular) == (9, 1, 0, 0)
+    # Two extra marks near each other (11.76: 0.76 + 0.24; 13.56: 0.56 + 0.53 = 1.09): the
+    # second is told only once the first is gone (its neighbours' median): two passes,
+    # both counted; the short period 0.47 after them is left a gap.
+    times = [float(k) for k in range(12)] + [11.76, 12.0, 13.0, 13.56, 14.09, 14.56, 15.56,
+                                             16.56]
+    marks = checked_marks(times)
+    assert marks.time.tolist() == [t for t in times if t not in (11.76, 13.56)]
+    assert (marks.doubled, marks.missed, marks.irregular) == (2, 0, 1)
+
+
+def test_a_doubled_mark_on_a_coast_down_against_its_own_neighbours():
+    """Periods growing 10 % a turn: a split period late in the run is judged on its own."""
+    periods = 0.05 * 1.1 ** np.arange(16)
+    times = np.concatenate([[0.0], np.cumsum(periods)])
+    split = times[13] + 0.3 * periods[13]
+    marks = checked_marks(np.sort(np.append(times, split)))
+    assert marks.doubled == 1 and np.array_equal(marks.time, times)
+
+
+def test_missed_marks_put_back_evenly_and_longer_gaps_left():
+    # A period of 2 (one mark lost) and of 3 (two lost): put back at the thirds.
+    times = [0.0, 1.0, 3.0, 4.0, 7.0, 8.0, 9.0]
+    marks = checked_marks(times)
+    np.testing.assert_allclose(marks.time, np.arange(10.0), rtol=0, atol=1e-15)
+    assert (marks.missed, marks.irregular, marks.revolutions) == (3, 0, 9)
+    # Four times (three lost): more than MAX_MISSED, a gap; 2.5 times: no whole number.
+    for long in (4.0, 2.5):
+        times = [0.0, 1.0, 2.0, 3.0, 3.0 + long, 4.0 + long, 5.0 + long, 6.0 + long]
+        marks = checked_marks(times)
+        assert marks.time.tolist() == times, long
+        assert (marks.missed, marks.irregular) == (0, 1)
+        assert marks.good.tolist() == [True, True, True, False, True, True, True]
+
+
+def test_the_tolerance_is_met_exactly_at_its_bound():
+    """Tolerance 0.25 (exact in binary): a period 1.25 is good, 1.3 is not; likewise 2.5/2."""
+    ok = checked_marks([0.0, 1.0, 2.0, 3.25, 4.25, 5.25], tolerance=0.25)
+    assert ok.good.all() and ok.irregular == 0
+    off = checked_marks([0.0, 1.0, 2.0, 3.3, 4.3, 5.3], tolerance=0.25)
+    assert off.good.tolist() == [True, True, False, True, True]
+    # A lost mark in a period of 2.5 = 2 x 1.25: put back; a doubled pair adding to 1.25.
+    lost = checked_marks([0.0, 1.0, 2.0, 4.5, 5.5, 6.5], tolerance=0.25)
+    assert lost.missed == 1 and lost.time.tolist() == [0.0, 1.0, 2.0, 3.25, 4.5, 5.5, 6.5]
+    double = checked_marks([0.0, 1.0, 2.0, 2.5, 3.25, 4.25, 5.25, 6.25], tolerance=0.25)
+    assert double.doubled == 1 and double.time.tolist() == [0.0, 1.0, 2.0, 3.25, 4.25,
+                                                            5.25, 6.25]
+
+
+# -- angle, speed and acceleration from the marks ----------------------------------------------
+
+def ramp_marks(count, speed=10.0, alpha=4.0):
+    """Mark times of theta = speed t + alpha t^2 / 2 = 2 pi k, solved by hand."""
+    k = np.arange(count)
+    return (-speed + np.sqrt(speed * speed + 2 * alpha * TWO_PI * k)) / alpha
+
+
+def test_the_speed_at_each_mark_by_hand_on_a_ramp():
+    t = ramp_marks(12)
+    marks = Marks(t, np.ones(11, bool), 12)
+    for span in (8, 2, 3):
+        speed = marks.mark_speed(span)
+        half = max(span // 2, 1)
+        for k in range(1, 11):
+            h = min(k, 11 - k, half)
+            assert speed[k] == pytest.approx(TWO_PI * 2 * h / (t[k + h] - t[k - h]), rel=1e-13)
+        # The end marks: the one period's speed carried on along the slope to the next.
+        first = TWO_PI / (t[1] - t[0])
+        last = TWO_PI / (t[11] - t[10])
+        assert speed[0] == pytest.approx(2 * first - speed[1], rel=1e-13)
+        assert speed[11] == pytest.approx(2 * last - speed[10], rel=1e-13)
+
+
+def test_runs_of_one_and_two_periods_and_a_lone_mark():
+    t = ramp_marks(9)
+    # Runs: marks 0-1 (one period), gap, 2-4 (two periods), gap, 5 alone, gap, 6-8.
+    good = np.array([True, False, True, True, False, False, True, True])
+    speed = Marks(t, good, 9).mark_speed()
+    one = TWO_PI / (t[1] - t[0])
+    assert speed[0] == speed[1] == pytest.approx(one, rel=1e-15)
+    middle = TWO_PI * 2 / (t[4] - t[2])
+    assert speed[3] == pytest.approx(middle, rel=1e-13)
+    assert speed[2] == pytest.approx(2 * TWO_PI / (t[3] - t[2]) - middle, rel=1e-13)
+    assert speed[4] == pytest.approx(2 * TWO_PI / (t[4] - t[3]) - middle, rel=1e-13)
+    assert math.isnan(speed[5])
+    assert np.isfinite(speed[[6, 7, 8]]).all()
+    assert np.isnan(Marks(np.array([1.0]), np.zeros(0, bool), 1).mark_speed()).tolist() == \
+        [True]
+    assert Marks(np.zeros(0), np.zeros(0, bool), 0).mark_speed().shape == (0,)
+    two = Marks(np.array([0.0, 0.5]), np.array([True]), 2)
+    assert two.mark_speed().tolist() == [TWO_PI / 0.5] * 2
+
+
+def test_angle_speed_and_acceleration_between_marks_by_hand():
+    t = ramp_marks(10)
+    marks = Marks(t, np.array([True] * 4 + [False] + [True] * 4), 10)
+    speed = marks.mark_speed()
+    # A third of the way through period 2; at the marks themselves; the last period.
+    at = np.array([t[2] + (t[3] - t[2]) / 3, t[0], t[3], t[9], t[8] + 0.5 * (t[9] - t[8])])
+    angle, omega, alpha = marks.motion(at)
+    assert angle.tolist() == pytest.approx([TWO_PI * (2 + 1 / 3), 0.0, TWO_PI * 3,
+                                            TWO_PI * 9, TWO_PI * 8.5], rel=1e-14)
+    assert omega[0] == pytest.approx(speed[2] + (speed[3] - speed[2]) / 3, rel=1e-14)
+    assert alpha[0] == pytest.approx((speed[3] - speed[2]) / (t[3] - t[2]), rel=1e-14)
+    # At a mark the period that starts there (the last mark: the one that ends there).
+    assert alpha[2] == pytest.approx((speed[4] - speed[3]) / (t[4] - t[3]), rel=1e-14)
+    assert alpha[3] == pytest.approx((speed[9] - speed[8]) / (t[9] - t[8]), rel=1e-14)
+    assert marks.angle(at).tolist() == angle.tolist()
+    # NaN before, after, and in the irregular period 4.
+    outside = np.array([t[0] - 1e-9, t[9] + 1e-9, 0.5 * (t[4] + t[5])])
+    for values in (*marks.motion(outside), marks.angle(outside)):
+        assert np.isnan(values).all()
+    # No period at all: NaN of the times' length.
+    lone = Marks(np.array([1.0]), np.zeros(0, bool), 1)
+    for values in (*lone.motion([0.5, 1.0, 2.0]), lone.angle([0.5, 1.0, 2.0])):
+        assert values.shape == (3,) and np.isnan(values).all()
+    two = Marks(np.array([0.0, 0.5]), np.array([True]), 2)
+    angle, omega, alpha = two.motion([0.25])
+    assert (angle[0], omega[0], alpha[0]) == (math.pi, TWO_PI / 0.5, 0.0)
+
+
+# -- steady stretches ---------------------------------------------------------------------------
+
+def stepped_marks(steps):
+    """Return the marks of constant speeds: [(revolutions, period s)] one after the other."""
+    periods = np.concatenate([np.full(n, period) for n, period in steps])
+    return Marks(np.concatenate([[0.0], np.cumsum(periods)]), np.ones(len(periods), bool),
+                 len(periods) + 1)
+
+
+def test_steady_stretches_of_a_speed_step_by_hand():
+    """
+    Split a speed step: 15 revolutions at 0.1 s, then 14 at 0.1 / 1.5 s.
+
+    Each mark's speed is averaged over 8 revolutions centred on it, so the marks within 4
+    of the step blend (3 % off and more): the first stretch is marks 0-11, the second
+    19-29, each at its exact speed.
+    """
+    marks = stepped_marks([(15, 0.1), (14, 0.1 / 1.5)])
+    slow, fast = steady_stretches(marks)
+    assert (slow.first, slow.last, slow.revolutions) == (0, 11, 11)
+    assert (fast.first, fast.last, fast.revolutions) == (19, 29, 10)
+    assert slow.speed == pytest.approx(TWO_PI / 0.1, rel=1e-13)
+    assert fast.speed == pytest.approx(TWO_PI * 1.5 / 0.1, rel=1e-13)
+    assert (slow.start, slow.end) == (marks.time[0], marks.time[11])
+    assert slow.spread < 1e-13 and fast.spread < 1e-13
+    # A wide tolerance (10 %: the whole run is one stretch? no: a 50 % step) still splits.
+    assert len(steady_stretches(marks, tolerance=0.1)) == 2
+    # Not a stretch when it is one revolution short.
+    assert steady_stretches(stepped_marks([(7, 0.1)])) == []
+    (exactly,) = steady_stretches(stepped_marks([(8, 0.1)]))
+    assert (exactly.first, exactly.last, exactly.revolutions) == (0, 8, 8)
+    assert steady_stretches(stepped_marks([(12, 0.1)]), min_revolutions=12)[0].last == 12
+    with pytest.raises(ValueError) as caught:
+        steady_stretches(marks, tolerance=0.0)
+    assert str(caught.value) == 'speed tolerance must be > 0, got 0.0'
+
+
+def test_a_stretch_stops_at_a_gap_and_its_spread_is_its_worst_mark():
+    marks = stepped_marks([(10, 0.1), (1, 0.37), (12, 0.1)])
+    checked = checked_marks(marks.time)
+    assert checked.good.tolist() == [True] * 10 + [False] + [True] * 12
+    first, second = steady_stretches(checked)
+    assert (first.first, first.last, second.first, second.last) == (0, 10, 11, 23)
+    # A 0.5 % slower period in the middle: the spread is the worst mark's speed off the mean.
+    jittered = stepped_marks([(6, 0.1), (1, 0.1005), (6, 0.1)])
+    (stretch,) = steady_stretches(jittered)
+    speed = jittered.mark_speed()
+    mean = TWO_PI * 13 / jittered.time[-1]
+    assert stretch.speed == pytest.approx(mean, rel=1e-14)
+    assert stretch.spread == pytest.approx(np.max(np.abs(speed - mean)) / mean, rel=1e-12)
+    assert stretch.spread > 1e-4
+
+
+def test_the_longest_run():
+    for mask, want in (([1, 1, 0, 1, 1, 1, 0], (3, 6)), ([0, 1, 0, 0, 1, 1], (4, 6)),
+                       ([1, 1, 1], (0, 3)), ([0, 1], (1, 2))):
+        assert _longest_run(np.array(mask, bool)) == want
