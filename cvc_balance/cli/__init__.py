@@ -14,8 +14,8 @@ import sys
 from cvc_balance.cli.arguments import EXIT_BAD_INPUT, EXIT_FAILURE
 from cvc_balance.physics.layout import LayoutError, one_line
 
-COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'field', 'readings',
-                   'fleet', 'bench')
+COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'life', 'field',
+                   'readings', 'fleet', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
 
 
