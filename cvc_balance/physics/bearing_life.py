@@ -190,28 +190,26 @@ class LifeCounters:
 
     Each sample's support forces come from the engine (:func:`sample_loads` one at a time,
     :func:`loads` in blocks); the steps between samples from their time, angle and speed.
-    ``counters``: {support name: LifeCounter}, given to carry counts over (a new layout
-    in force: the same bearings go on turning).
     """
 
-    def __init__(self, supports, carried=None):
+    def __init__(self, supports, counters=None, last=None):
         """
         Count the bearings of ``supports`` (a layout's).
 
-        ``carried``: the LifeCounters of the layout in force before, whose counts (and last
-        sample) go on where a support keeps its name and its bearing.
+        ``counters``: {support name: LifeCounter} to go on from where a support keeps its
+        bearing (a layout change, a count read back); ``last``: the last sample (time s,
+        angle rad, omega rad/s) counted before (:attr:`last`), so the step from it counts.
         """
-        before = carried.counters if carried is not None else {}
+        counters = counters or {}
         self.counters = {}
         for support in supports:
             if support.bearing is None:
                 continue
-            counter = before.get(support.name)
+            counter = counters.get(support.name)
             if counter is None or counter.bearing != support.bearing:
                 counter = LifeCounter(support.name, support.bearing)
             self.counters[support.name] = counter
-        self._last = carried._last if carried is not None else None
-        # (time s, angle rad, omega rad/s) of the last sample
+        self.last = last
         self._constants = tuple(
             (c, name, c.bearing.X, c.bearing.Y, c.bearing.e, c.inverse, c.cube, c.exponent)
             for name, c in self.counters.items())        # what add_sample reads, at hand
@@ -222,7 +220,7 @@ class LifeCounters:
 
     def restart(self):
         """Forget the last sample: the next starts anew (a new time line, a gap)."""
-        self._last = None
+        self.last = None
         for counter in self.counters.values():
             counter.last_rate = None
 
@@ -233,8 +231,8 @@ class LifeCounters:
         ``time`` s, ``angle`` rad, ``omega`` rad/s; ``supports``: {name: (force, moment)}
         as :class:`~cvc_balance.physics.engine.SampleLoads` holds them, stator frame.
         """
-        last = self._last
-        self._last = (time, angle, omega)
+        last = self.last
+        self.last = (time, angle, omega)
         if last is None:
             half = elapsed = 0.0
         else:
@@ -270,9 +268,9 @@ class LifeCounters:
         time, angle, omega = (np.asarray(v, dtype=float) for v in (time, angle, omega))
         if not len(time):
             return {name: np.zeros(0) for name in self.counters}
-        joined = self._last is not None       # the step from the last sample counts too
+        joined = self.last is not None       # the step from the last sample counts too
         if joined:
-            time, angle, omega = (np.concatenate([[b], v]) for b, v in zip(self._last,
+            time, angle, omega = (np.concatenate([[b], v]) for b, v in zip(self.last,
                                                                            (time, angle, omega)))
         steps = turns(time, angle, omega)
         elapsed = np.diff(time)
@@ -294,7 +292,7 @@ class LifeCounters:
             counter.seconds += float(counted_time.sum())
             counter.last_rate = float(rate[-1])
             out[name] = used[1:] if joined else used
-        self._last = (float(time[-1]), float(angle[-1]), float(omega[-1]))
+        self.last = (float(time[-1]), float(angle[-1]), float(omega[-1]))
         return out
 
     def uses(self):

@@ -657,7 +657,7 @@ def _bearing(spec, where):
     a1 = _number(spec.get('a1', 1.0), f'{where}.a1', limits.RELIABILITY_FACTOR)
     speed = None
     if 'limit_speed' in spec:
-        speed = _number(spec['limit_speed'], f'{where}.limit_speed', limits.SPEED)
+        speed = _number(spec['limit_speed'], f'{where}.limit_speed', limits.LIMITING_SPEED)
     return Bearing(rating, kind, factors.get('X', 1.0), factors.get('Y', 0.0), e, a1, speed)
 
 

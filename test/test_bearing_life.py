@@ -1,0 +1,302 @@
+"""
+Bearing life (ISO 281 basic rating life) against independent references.
+
+* A bearing maker's printed examples, to their printed digits: SKF's catalogue example
+  (6309, C 55.3 kN, 10 kN radial at 3000 r/min: L10 169 million revolutions, 940 h) and its
+  bearing calculator's report (6309, Fr 4 kN, Fa 0.5 kN at 1800 r/min: P 4 kN, C/P 13.8,
+  L10h 24500 h).
+* A constant load over a spin-up (closed form: (P/C)^p times the revolutions, which the
+  motion gives by hand), and ISO 281's factors switching at Fa/Fr = e.
+* A static plus a rotating load against mpmath's quadrature of |F(q)|^p over the angle the
+  rotor turned.
+* A ramp through the whole command (``cvc-balance life --json``), the loads from Pinocchio's
+  RNEA split by statics by hand, the balanced rotor's by hand from Pinocchio's mass
+  properties.
+* Load cells (a simulated run, the cells' zeros off): measured and layout lives agree when
+  the rotor is its layout, and the measured life is the true rotor's when it is not.
+* A bag whose layouts describe no bearing: one line naming the field, no numbers, exit 1;
+  a bearing field out of range: one line; a layout without bearings keeps its digest.
+"""
+
+import copy
+import json
+import math
+
+import mpmath
+import numpy as np
+import pytest
+import yaml
+
+from cvc_balance.cli import main
+from cvc_balance.physics.bearing_life import LifeCounters
+from cvc_balance.physics.layout import Bearing, LayoutError
+from cvc_balance.physics.layout_file import layout_from_text, load_layout
+from independent import PinocchioRotor, ramp, write_input_bag
+
+GANTRY = yaml.safe_load(open('config/ct_gantry.yaml'))
+BEARINGS = yaml.safe_load(open('config/ct_gantry_bearings.yaml'))
+
+
+class Support:
+    """A support as the counters read it: a name and a bearing."""
+
+    def __init__(self, name, bearing):
+        self.name, self.bearing = name, bearing
+
+
+def steady_run(rpm, seconds, rate=2000.0):
+    """Samples of a constant speed: time s, angle rad (wrapped), omega rad/s."""
+    omega = rpm * 2.0 * math.pi / 60.0
+    time = np.arange(int(seconds * rate) + 1) / rate
+    return time, np.remainder(omega * time, 2.0 * math.pi), np.full(len(time), omega)
+
+
+def counted(bearing, time, angle, omega, force):
+    """The LifeUse of one bearing under ``force`` (n, 3) over the samples, by blocks."""
+    counters = LifeCounters([Support('b', bearing)])
+    for a in range(0, len(time), 1000):     # in blocks: the steps between them count too
+        counters.add(time[a:a + 1000], angle[a:a + 1000], omega[a:a + 1000],
+                     {'b': force[a:a + 1000]})
+    return counters.uses()['b']
+
+
+def test_skf_catalogue_example_to_its_printed_digits():
+    # SKF, Rolling bearings (catalogue PUB BU/P1 10000/2 EN), "Calculation examples",
+    # Example 1: SKF Explorer 6309 at 3 000 r/min under a constant radial load Fr = 10 kN;
+    # C = 55,3 kN, P = Fr: L10 = (55,3/10)^3 = 169 million revolutions, L10h = 10^6 /
+    # (60 x 3 000) x 169 = 940 operating hours.
+    # https://www.yumpu.com/en/document/view/55668573/skf-rolling-bearings/92
+    time, angle, omega = steady_run(3000.0, 2.0)
+    force = np.zeros((len(time), 3))
+    force[:, 0] = 10_000.0
+    use = counted(Bearing(55_300.0, 'ball'), time, angle, omega, force)
+    assert round(use.revolutions / use.life_used / 1e6) == 169      # L10, 10^6 revolutions
+    assert round(use.rating_life_hours) == 940
+    assert use.equivalent_load == pytest.approx(10_000.0, rel=1e-12)
+    assert use.revolutions == pytest.approx(100.0, rel=1e-12)        # 3000 r/min, 2 s
+
+
+def test_skf_calculator_report_with_an_axial_load_below_e():
+    # SKF Bearing Calculator, calculation summary report, designation 6309 (C 55.3 kN,
+    # C0 31.5 kN): radial load 4 kN, axial load 0.5 kN, inner ring at 1800 r/min; result:
+    # equivalent dynamic bearing load P 4 kN, load ratio C/P 13.8, basic rating life
+    # L10h 24500 hour. Fa/Fr = 0.125 is below e (SKF's table: e about 0.2 at
+    # f0 Fa/C0 = 13.1 x 0.5 / 31.5 = 0.21), so P = Fr.
+    # https://ja.scribd.com/document/254704766/SELECCION-RODAMIENTO1
+    time, angle, omega = steady_run(1800.0, 2.0)
+    force = np.zeros((len(time), 3))
+    force[:, 1], force[:, 2] = -4_000.0, 500.0
+    bearing = Bearing(55_300.0, 'ball', X=0.56, Y=2.2, e=0.2)
+    use = counted(bearing, time, angle, omega, force)
+    assert use.equivalent_load == pytest.approx(4_000.0, rel=1e-12)
+    assert round(bearing.C / use.equivalent_load, 1) == 13.8
+    assert f'{use.rating_life_hours:.3g}' == '2.45e+04'              # 24500 hour
+
+
+def test_constant_load_over_a_spin_up_is_the_closed_form():
+    # A roller bearing under a constant radial and axial load beyond e, over a spin-up from
+    # rest and a steady part: P = X Fr + Y Fa by hand, and the revolutions by hand.
+    alpha, top, rate = 4.0, 30.0, 1000.0
+    ramp_time = top / alpha
+    time = np.arange(int(12.0 * rate) + 1) / rate
+    omega = np.minimum(alpha * time, top)
+    turned = np.where(time <= ramp_time, 0.5 * alpha * time ** 2,
+                      0.5 * alpha * ramp_time ** 2 + top * (time - ramp_time))
+    bearing = Bearing(90_000.0, 'roller', X=0.4, Y=1.6, e=0.37, a1=0.21)
+    force = np.tile([3_000.0, -4_000.0, 2_500.0], (len(time), 1))    # Fr 5 kN, Fa 2.5 kN
+    load = 0.4 * 5_000.0 + 1.6 * 2_500.0                              # Fa/Fr 0.5 > e
+    use = counted(bearing, time, np.remainder(turned, 2 * math.pi), omega, force)
+    revolutions = turned[-1] / (2 * math.pi)
+    assert use.revolutions == pytest.approx(revolutions, rel=1e-12)
+    assert use.equivalent_load == pytest.approx(load, rel=1e-12)
+    used = (load / 90_000.0) ** (10.0 / 3.0) * revolutions / 1e6 / 0.21
+    assert use.life_used == pytest.approx(used, rel=1e-12)
+    assert use.rating_life_hours == pytest.approx(12.0 / 3600.0 / used, rel=1e-12)
+    # Below e, the same bearing takes the radial load alone.
+    force[:, 2] = 1_000.0                                             # Fa/Fr 0.2 < e
+    below = counted(bearing, time, np.remainder(turned, 2 * math.pi), omega, force)
+    assert below.equivalent_load == pytest.approx(5_000.0, rel=1e-12)
+
+
+def test_static_and_rotating_load_against_quadrature_over_the_angle():
+    # A static load (the weight) and one turning with the rotor (an unbalance): the bearing's
+    # damage is the integral of (|F(q)|/C)^p over the angle turned, by mpmath's quadrature.
+    static = np.array([400.0, -5_200.0])
+    rotating, phase = 3_100.0, 0.7
+    rpm, seconds = 400.0, 3.37                   # 22.47 revolutions: not a whole number
+    time, angle, omega = steady_run(rpm, seconds, rate=1000.0)
+    turned = omega[0] * time
+    force = np.zeros((len(time), 3))
+    force[:, 0] = static[0] + rotating * np.cos(turned + phase)
+    force[:, 1] = static[1] + rotating * np.sin(turned + phase)
+    for kind, p in (('ball', 3), ('roller', mpmath.mpf(10) / 3)):
+        bearing = Bearing(60_000.0, kind)
+        use = counted(bearing, time, angle, omega, force)
+
+        def rate(q):
+            x = static[0] + rotating * mpmath.cos(q + phase)
+            y = static[1] + rotating * mpmath.sin(q + phase)
+            return (mpmath.sqrt(x * x + y * y) / 60_000) ** p
+        end = mpmath.mpf(float(turned[-1]))
+        whole = int(end // (2 * mpmath.pi))
+        damage = whole * mpmath.quad(rate, [0, mpmath.pi, 2 * mpmath.pi]) / (2 * mpmath.pi) \
+            + mpmath.quad(rate, [2 * mpmath.pi * whole, end]) / (2 * mpmath.pi)
+        # The trapezoid over 0.042 rad steps: within h^2/12 |L'(end) - L'(0)| of the
+        # integral over a part of a turn (measured 2.0e-6 of the damage, both kinds).
+        assert use.damage == pytest.approx(float(damage), rel=1e-5), kind
+        assert use.revolutions == pytest.approx(float(end / (2 * mpmath.pi)), rel=1e-12)
+
+
+def bearings_layout():
+    """The pipeline gantry of test_pipeline_reference, with a large unbalance and bearings."""
+    layout = {
+        'name': 'life_gantry', 'gravity': [0.0, -9.80665, 0.0],
+        'components': [
+            {'name': 'drum', 'mass': 250.0, 'radius': 0.0, 'angle': 0.0,
+             'shape': {'type': 'tube', 'inner_radius': 0.62, 'outer_radius': 0.7,
+                       'length': 0.4}},
+            {'name': 'tube', 'mass': 60.0, 'radius': 0.55, 'angle_deg': 15.0, 'z': 0.06,
+             'shape': {'type': 'cylinder', 'radius': 0.09, 'length': 0.35,
+                       'axis': 'tangential'}},
+            {'name': 'detector', 'mass': 90.0, 'radius': 0.5, 'angle_deg': 190.0, 'z': -0.04,
+             'shape': {'type': 'box', 'size': [0.12, 0.8, 0.16]}},
+            {'name': 'lump', 'mass': 12.0, 'radius': 0.6, 'angle_deg': 280.0, 'z': 0.25}],
+        'supports': [
+            {'name': 'front', 'z': -0.3, 'bearing': {'C': 40_000.0, 'type': 'ball'}},
+            {'name': 'rear', 'z': 0.35, 'axial': True,
+             'bearing': {'C': 50_000.0, 'type': 'roller', 'a1': 0.62}}],
+        'balancing': {'planes': [-0.2, 0.25], 'correction_radius': 0.65, 'grade': 6.3,
+                      'service_speed': 23.27}}
+    return layout
+
+
+@pytest.fixture(scope='module')
+def pinocchio_run(tmp_path_factory):
+    """A spin-up bag of the bearings layout and the command's JSON of it."""
+    folder = tmp_path_factory.mktemp('life')
+    layout = bearings_layout()
+    stamps, angle, omega = ramp(0.5, 3.0, rate=200.0, seconds=8.0)
+    bag = write_input_bag(folder / 'in.mcap', stamps, angle, omega,
+                          [(int(stamps[0]) - 1_000_000, yaml.safe_dump(layout))])
+    return {'layout': layout, 'bag': bag, 'stamps': stamps, 'angle': angle, 'omega': omega}
+
+
+def test_whole_command_against_pinocchio(pinocchio_run, capsys):
+    run = pinocchio_run
+    assert main(['life', str(run['bag']), '--json']) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert list(found) == ['segments'] and len(found['segments']) == 1
+    segment = found['segments'][0]
+    assert segment['layout']['name'] == 'life_gantry'
+    rotor = PinocchioRotor(run['layout'])
+    stamps, omega = run['stamps'], run['omega']
+    alpha = np.full(len(stamps), 3.0)
+    alpha[0] = 0.0                        # the estimator's first sample: no slope yet
+    forces = [rotor.loads(q, w, a)['supports'] for q, w, a in zip(run['angle'], omega, alpha)]
+    seconds = (stamps - stamps[0]) * 1e-9
+    steps = 0.5 * (omega[1:] + omega[:-1]) * np.diff(seconds) / (2 * math.pi)   # exact: ramp
+    mass, com, _ = rotor.mass_properties()
+    supports = {s['name']: s for s in run['layout']['supports']}
+    z_a, z_b = supports['front']['z'], supports['rear']['z']
+    weight = mass * 9.80665                     # the balanced rotor: its weight, by statics
+    quiet = {'front': weight * (z_b - com[2]) / (z_b - z_a),
+             'rear': weight * (com[2] - z_a) / (z_b - z_a)}
+    assert [s['name'] for s in segment['supports']] == ['front', 'rear']
+    for record in segment['supports']:
+        name, spec = record['name'], supports[record['name']]['bearing']
+        p = 3.0 if spec['type'] == 'ball' else 10.0 / 3.0
+        a1 = spec.get('a1', 1.0)
+        load = np.array([math.hypot(f[name][0][0], f[name][0][1]) for f in forces])
+        rate = (load / spec['C']) ** p
+        damage = float(np.sum(0.5 * (rate[1:] + rate[:-1]) * steps))
+        revolutions = float(steps.sum())
+        quiet_damage = (quiet[name] / spec['C']) ** p * revolutions
+        assert record['bearing'] == {'C': spec['C'], 'type': spec['type'], 'p': p, 'X': 1.0,
+                                     'Y': 0.0, 'e': None, 'a1': a1, 'limit_speed': None}
+        assert record['revolutions'] == pytest.approx(revolutions, rel=1e-9)
+        got = record['layout']
+        assert got['life_used'] == pytest.approx(damage / 1e6 / a1, rel=1e-9)
+        assert got['equivalent_load_N'] == pytest.approx(
+            spec['C'] * (damage / revolutions) ** (1 / p), rel=1e-9)
+        assert got['l10_hours'] == pytest.approx(
+            seconds[-1] / 3600.0 / (damage / 1e6 / a1), rel=1e-9)
+        assert got['unbalance_share'] == pytest.approx(damage / quiet_damage - 1.0, rel=1e-8)
+        assert got['unbalance_share'] > 0.01       # the lump's 7 kg m is felt
+        assert record['measured'] is None           # no load cells in the bag
+
+
+def test_text_says_each_bearing_and_what_the_unbalance_costs(pinocchio_run, capsys):
+    assert main(['life', str(pinocchio_run['bag'])]) == 0
+    text = capsys.readouterr().out
+    assert main(['life', str(pinocchio_run['bag']), '--json']) == 0
+    record = json.loads(capsys.readouterr().out)['segments'][0]['supports']
+    lines = text.splitlines()
+    assert lines[0].startswith(f"bag {pinocchio_run['bag']}: bearing life per layout segment")
+    assert lines[1].startswith("layout 'life_gantry' (")
+    front, rear = record
+    assert lines[2] == (f"  bearing front (ball, C 40000 N): {front['revolutions']:.1f} "
+                        f"revolutions in {front['layout']['l10_hours'] * front['layout']['life_used']:.4g} h")
+    layout = front['layout']
+    assert lines[3] == (f"    layout:   P_m {layout['equivalent_load_N']:.6g} N, life used "
+                        f"{layout['life_used']:.4g}, L10 {layout['l10_hours']:.4g} h at this "
+                        f"duty; this unbalance uses {100 * layout['unbalance_share']:.3g} % "
+                        'more of its life than the rotor balanced')
+    assert lines[5].startswith(f"    layout:   P_m {rear['layout']['equivalent_load_N']:.6g} N")
+    assert ', L (a1 0.62) ' in lines[5]             # not L10: the rear asks 95 % reliability
+
+
+def test_without_bearing_data_one_line_and_no_numbers(tmp_path, capsys):
+    stamps, angle, omega = ramp(1.0, 2.0, rate=100.0, seconds=2.0)
+    bag = write_input_bag(tmp_path / 'plain.mcap', stamps, angle, omega,
+                          [(int(stamps[0]) - 1, yaml.safe_dump(GANTRY))])
+    assert main(['life', str(bag), '--json']) == 1
+    out, err = capsys.readouterr()
+    assert out == ''
+    digest = load_layout('config/ct_gantry.yaml').digest()
+    assert err == (f'cvc-balance: error: {bag}: no bearing data: give each support a field '
+                   'bearing (supports[].bearing: C, the basic dynamic load rating in N, and '
+                   'type ball or roller; optional X, Y, e, a1, limit_speed), in the bag\'s '
+                   f"layout or with --layout-file; its layouts: 'ct_gantry_demo' ({digest})\n")
+
+
+@pytest.mark.parametrize('bearing, said', [
+    ({'C': 0.0}, 'field bearing.C must be from 1 to 1e+09 N (a newton or more: the loads are '
+     "divided by it, and the largest slewing bearings' C is below 10^8 N), got 0 N"),
+    ({'C': 1e5, 'X': -0.5}, "field bearing.X must be from 0 to 10 (ISO 281's factors are "
+     "below 3, a thrust bearing's up to 10), got -0.5"),
+    ({'C': 1e5, 'type': 'needle'}, "field bearing.type: unknown bearing type 'needle', "
+     'expected one of ball, roller (life exponent 3 or 10/3)'),
+    ({'C': 1e5, 'a1': 1.5}, 'field bearing.a1 must be from 0.05 to 1 (ISO 281 a1: 1 at 90 % '
+     'reliability (L10), 0.05 beyond 99.95 %), got 1.5'),
+    ({'C': 1e5, 'X': 0.0}, 'field bearing: X and Y are both 0: the equivalent load would be 0 '
+     '(radial only: X 1, Y 0)'),
+    ({'C': 1e5, 'e': -1}, "field bearing.e must be from 0.01 to 10 (the Fa / Fr at which ISO "
+     "281's factors switch), got -1"),
+    ({'C': 1e5, 'limit_speed': 0}, "field bearing.limit_speed must be from 0.1 to 100000 rad/s "
+     "(a maker's limiting speed: 1 rpm to 955 000 rpm), got 0 rad/s"),
+    ({'type': 'ball'}, 'field bearing: missing field C'),
+    ({'C': 1e5, 'c': 3}, "field bearing: unknown field 'c' (known: C, type, X, Y, e, a1, "
+     'limit_speed)'),
+])
+def test_a_bad_bearing_is_one_line_in_yaml_and_json(bearing, said):
+    layout = copy.deepcopy(GANTRY)
+    layout['supports'][0]['bearing'] = bearing
+    for text in (yaml.safe_dump(layout), json.dumps(layout)):     # both readers
+        with pytest.raises(LayoutError) as error:
+            layout_from_text(text)
+        assert str(error.value) == f"layout: support 'front': {said}"
+
+
+def test_bearings_read_alike_from_yaml_and_json_and_old_digests_stay():
+    # The digest every bundled bag and picture knows for the gantry without bearings.
+    assert load_layout('config/ct_gantry.yaml').digest() == 'd3882a62afc9'
+    with_bearings = load_layout('config/ct_gantry_bearings.yaml')
+    from_json = layout_from_text(json.dumps(BEARINGS))
+    assert from_json == with_bearings and from_json.digest() == with_bearings.digest()
+    front, rear = with_bearings.supports
+    assert front.bearing == Bearing(180_000.0, 'ball', limit_speed=60.0)
+    assert rear.bearing == Bearing(180_000.0, 'ball', 0.35, 0.57, 1.14, 1.0, 60.0)
+    plain = copy.deepcopy(BEARINGS)
+    for support in plain['supports']:
+        del support['bearing']
+    assert layout_from_text(yaml.safe_dump(plain)).digest() != with_bearings.digest()
