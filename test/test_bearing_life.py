@@ -300,3 +300,178 @@ def test_bearings_read_alike_from_yaml_and_json_and_old_digests_stay():
     for support in plain['supports']:
         del support['bearing']
     assert layout_from_text(yaml.safe_dump(plain)).digest() != with_bearings.digest()
+
+
+def test_load_cells_measure_the_true_rotors_life(tmp_path, capsys):
+    # The real rotor's rear counterweight sits 8.3 deg from where its layout says; the cells
+    # (their zeros off by up to 340 N) read the real rotor. Measured, the bearings' life is
+    # the true layout's; the declared layout's misses what the moved counterweight costs.
+    declared = copy.deepcopy(BEARINGS)
+    true = copy.deepcopy(BEARINGS)
+    moved = next(c for c in true['components'] if c['name'] == 'counterweight_rear')
+    moved['angle_deg'] = 262.0
+    (tmp_path / 'declared.yaml').write_text(yaml.safe_dump(declared))
+    (tmp_path / 'true.yaml').write_text(yaml.safe_dump(true))
+    (tmp_path / 'run.yaml').write_text(yaml.safe_dump({
+        'name': 'cells', 'layout': 'declared.yaml', 'joint_name': 'gantry_joint', 'rate': 500,
+        'seed': 3, 'noise': {'angle': 0.0, 'speed': 0.0},
+        'profile': [{'type': 'spin_up', 'to': 23.27, 'alpha': 6.0},
+                    {'type': 'steady', 'duration': 6.0}],
+        'hidden': [{'at': 0.0, 'set': {'component': 'counterweight_rear', 'angle_deg': 262.0}}],
+        'load_cells': {'rate': 500, 'noise': 0.0,
+                       'bias': {'front': [120.0, -340.0, 5.0], 'rear': [-80.0, 55.0, -3.0]}}}))
+    bag = str(tmp_path / 'run.mcap')
+    assert main(['simulate', str(tmp_path / 'run.yaml'), '-o', bag]) == 0
+    capsys.readouterr()
+    lives = {}
+    for name, extra in (('declared', []), ('true', ['--layout-file', str(tmp_path / 'true.yaml')])):
+        assert main(['life', bag, '--json', *extra]) == 0
+        lives[name] = {s['name']: s for s in
+                       json.loads(capsys.readouterr().out)['segments'][0]['supports']}
+    for support in ('front', 'rear'):
+        measured = lives['declared'][support]['measured']
+        truth = lives['true'][support]['layout']
+        # Over the cells' readings (the samples' span less a reading): P_m and the rate.
+        assert measured['equivalent_load_N'] == pytest.approx(truth['equivalent_load_N'],
+                                                              rel=1e-4)
+        assert measured['l10_hours'] == pytest.approx(truth['l10_hours'], rel=1e-4)
+        assert measured['unbalance_share'] == pytest.approx(truth['unbalance_share'],
+                                                            rel=1e-3, abs=1e-5)
+    declared_rear = lives['declared']['rear']['layout']
+    assert declared_rear['unbalance_share'] < 1e-3 < 0.3 < \
+        lives['declared']['rear']['measured']['unbalance_share']
+
+
+def node_life(probe):
+    """The last 'bearing life' status the node sent, and its values (None: none yet)."""
+    for array in reversed(probe.received['/diagnostics']):
+        for status in array.status:
+            if status.name.endswith(': bearing life'):
+                return status, {kv.key: kv.value for kv in status.values}
+    return None, {}
+
+
+def run_node(tmp_path, probe, record, first_k, count, omega=10.0):
+    """Start the node recording to ``record``, send ``count`` samples from the k-th; stop it."""
+    import signal
+    from sensor_msgs.msg import JointState
+    from ros_harness import NodeProcess
+    layout = bearings_layout()
+    layout['supports'][0]['bearing']['limit_speed'] = 5.0
+    (tmp_path / 'layout.yaml').write_text(yaml.safe_dump(layout))
+    (tmp_path / 'params.yaml').write_text(yaml.safe_dump({'balance_monitor': {
+        'ros__parameters': {'joint_name': 'spin', 'diagnostics_period': 0.2,
+                            'layout_file': str(tmp_path / 'layout.yaml'),
+                            'record_path': str(tmp_path / record),
+                            'machine_id': 'gantry7/B:1'}}}))
+    node = NodeProcess('cvc_balance.ros.balance_monitor',
+                       ['--params-file', str(tmp_path / 'params.yaml')], tmp_path / 'node.log')
+    joints = probe.publisher(JointState, 'joint_states', sensor=True)
+    assert probe.spin_until(lambda: probe.node.count_subscribers('joint_states') >= 1,
+                            timeout=20.0), node.log()
+    probe.spin_for(1.5)
+    step = 0.005
+    for k in range(first_k, first_k + count):
+        msg = JointState(name=['spin'], position=[math.remainder(omega * k * step, 2 * math.pi)],
+                         velocity=[omega])
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(10**10 + k * 5_000_000,
+                                                                10**9)
+        joints.publish(msg)
+        probe.spin_for(0.002)
+    probe.received['/diagnostics'].clear()
+    assert probe.spin_until(lambda: node_life(probe)[1].get('front revolutions since start')
+                            and float(node_life(probe)[1]['front revolutions since start'])
+                            >= 0.999 * omega * (count - 1) * step / (2 * math.pi),
+                            timeout=10.0), node.log()
+    status, values = node_life(probe)
+    assert node.stop(signal.SIGINT) == 0
+    return status, values, node
+
+
+@pytest.fixture
+def diagnostics_probe():
+    from diagnostic_msgs.msg import DiagnosticArray
+    from ros_harness import Probe
+    probe = Probe()
+    probe.record(DiagnosticArray, '/diagnostics')
+    yield probe
+    probe.close()
+
+
+def test_node_counts_life_live_and_across_restarts(tmp_path, diagnostics_probe):
+    # Pinocchio's loads at each sample's angle (constant speed, alpha 0), the trapezoid over
+    # the angle turned by hand: the life used since start; a second run (a new recording in
+    # the same folder) goes on from the state file the first left.
+    from diagnostic_msgs.msg import DiagnosticStatus
+    omega, step = 10.0, 0.005
+    rotor = PinocchioRotor(bearings_layout())
+    layout = bearings_layout()
+
+    def expected(first_k, count):
+        angles = omega * step * np.arange(first_k, first_k + count)
+        turns = omega * step / (2 * math.pi) * (count - 1)
+        out = {}
+        for support in layout['supports']:
+            name, spec = support['name'], support['bearing']
+            p = 3.0 if spec['type'] == 'ball' else 10.0 / 3.0
+            load = np.array([math.hypot(*rotor.loads(q, omega, 0.0)['supports'][name][0][:2])
+                             for q in angles])
+            rate = (load / spec['C']) ** p
+            damage = float(np.sum(0.5 * (rate[1:] + rate[:-1]))) * omega * step / (2 * math.pi)
+            out[name] = (damage / 1e6 / spec.get('a1', 1.0), turns)
+        return out
+
+    status, values, node = run_node(tmp_path, diagnostics_probe, 'run1.mcap', 0, 300)
+    first = expected(0, 300)
+    hours = 299 * step / 3600.0
+    for name, (used, turns) in first.items():
+        assert float(values[f'{name} revolutions since start']) == pytest.approx(turns,
+                                                                                 rel=1e-5)
+        assert float(values[f'{name} life used since start']) == pytest.approx(used, rel=1e-5)
+        assert float(values[f'{name} life used in all']) == pytest.approx(used, rel=1e-5)
+        assert float(values[f'{name} life used per hour of running']) == pytest.approx(
+            used / hours, rel=1e-5)
+        assert float(values[f'{name} life left at this duty [h]']) == pytest.approx(
+            (1.0 - used) * hours / used, rel=1e-5)
+    state = tmp_path / 'bearing_life_gantry7_B_1.json'
+    assert values['state file'] == str(state)
+    assert status.level == DiagnosticStatus.WARN        # front's limiting speed is 5 rad/s
+    front = float(values['front life used since start'])
+    rate = float(values['front life used per hour of running'])
+    assert status.message.startswith(
+        'bearing life: front: speed 10 rad/s over its limiting speed 5 rad/s; front '
+        f'{front:.3g} used since start ({rate:.3g}/h: rating life {1 / rate:.4g} h at this '
+        f'duty), {front:.3g} in all; rear ')
+    saved = json.loads(state.read_text())
+    assert saved['kind'] == 'cvc_balance bearing life'
+    assert saved['supports']['front']['life_used'] == pytest.approx(first['front'][0],
+                                                                    rel=1e-5)
+
+    status, values, node = run_node(tmp_path, diagnostics_probe, 'run2.mcap', 1000, 200)
+    second = expected(1000, 200)
+    for name in first:
+        assert float(values[f'{name} life used since start']) == pytest.approx(
+            second[name][0], rel=1e-5)
+        assert float(values[f'{name} life used in all']) == pytest.approx(
+            first[name][0] + second[name][0], rel=1e-5)
+
+
+def test_an_unreadable_state_file_is_kept_and_said(tmp_path):
+    from cvc_balance.ros.bearing_life import BearingLife, state_path
+    path = state_path(tmp_path / 'run.mcap', 'gantry7')
+    path.write_text('{"kind": "cvc_balance bearing life", "supports": {"front": {"bearing": '
+                    '{}, "revolutions": -3}}}')
+    said = []
+    life = BearingLife(path, lambda severity, text: said.append((severity, text)))
+    supports = load_layout('config/ct_gantry_bearings.yaml').supports
+    life.layout(supports)
+    life.save()
+    assert path.read_text().startswith('{"kind": "cvc_balance bearing life", "supports"')
+    problem = (f"state file unreadable, not written over (counted from 0 since start): "
+               f"{path}: support 'front': give bearing and revolutions, damage, seconds "
+               '(finite, >= 0)')
+    assert said == [('error', f'bearing life: {problem}')]
+    level, message, values = life.status(0.0)
+    assert values['state file'] == problem
+    assert message == 'bearing life: front 0 used since start, 0 in all; rear 0 used since ' \
+        'start, 0 in all'
