@@ -475,3 +475,19 @@ def test_an_unreadable_state_file_is_kept_and_said(tmp_path):
     assert values['state file'] == problem
     assert message == 'bearing life: front 0 used since start, 0 in all; rear 0 used since ' \
         'start, 0 in all'
+
+
+def test_rerun_view_plots_each_bearings_life_used(pinocchio_run, tmp_path, capsys):
+    from test_rerun_view import read_rrd
+    rrd = tmp_path / 'run.rrd'
+    assert main(['view', str(pinocchio_run['bag']), '-o', str(rrd)]) == 0
+    capsys.readouterr()
+    assert main(['life', str(pinocchio_run['bag']), '--json']) == 0
+    record = json.loads(capsys.readouterr().out)['segments'][0]['supports']
+    scalars, _, paths = read_rrd(rrd)
+    assert {'/plots/life/front', '/plots/life/rear'} <= paths
+    for support in record:
+        times, used = scalars[f"/plots/life/{support['name']}"]
+        assert len(times) == len(pinocchio_run['stamps'])
+        assert np.all(np.diff(used) >= 0.0) and used[0] == 0.0
+        assert used[-1] == pytest.approx(support['layout']['life_used'], rel=1e-12)
