@@ -491,3 +491,62 @@ def test_rerun_view_plots_each_bearings_life_used(pinocchio_run, tmp_path, capsy
         assert len(times) == len(pinocchio_run['stamps'])
         assert np.all(np.diff(used) >= 0.0) and used[0] == 0.0
         assert used[-1] == pytest.approx(support['layout']['life_used'], rel=1e-12)
+
+
+def test_fleet_sums_each_machines_bearing_life_and_ranks_by_hours_left(tmp_path, capsys):
+    # A simulated fleet (load cells: measured where the cells can tell) analysed into the
+    # table; per machine and bearing the life used is the sum of what `life` says of each
+    # run (of record), the duty that of the latest layout's runs, the hours left by hand.
+    from datetime import datetime
+    fleet = tmp_path / 'fleet'
+    assert main(['simulate-fleet', 'config/ct_gantry_bearings.yaml', '-o', str(fleet),
+                 '--machines', '2', '--runs', '3', '--days', '20', '--rate', '50',
+                 '--cell-rate', '50']) == 0
+    results = tmp_path / 'fleet.parquet'
+    assert main(['fleet', str(fleet), '--out', str(results), '--engine', 'local']) == 0
+    capsys.readouterr()
+    expected = {}
+    for bag in sorted(fleet.glob('*/*')):
+        if bag.suffix == '.yaml':
+            continue
+        assert main(['replay', str(bag), '--json']) == 0
+        record = json.loads(capsys.readouterr().out)
+        for segment in record['segments']:
+            hours = (segment['last_sample'] - segment['first_sample']) / 3600.0
+            source = 'measured' if segment['verdict']['source'] == 'measured' else 'layout'
+            for support in segment['life']:
+                use = support[source] or support['layout']
+                runs = expected.setdefault((record['machine_id'], support['name']), [])
+                runs.append((datetime.fromisoformat(segment['start_utc'].replace('Z', '')),
+                             segment['layout']['digest'], use['life_used'], hours))
+    assert main(['trends', str(results), '--rank', 'life', '--json']) == 0
+    machines = json.loads(capsys.readouterr().out)['machines']
+    left = []
+    for machine in machines:
+        worst = None
+        for bearing in machine['bearings']:
+            runs = sorted(expected[(machine['machine_id'], bearing['support'])])
+            latest = [r for r in runs if r[1] == runs[-1][1]]
+            used = sum(r[2] for r in runs)
+            duty = sum(r[2] for r in latest) / sum(r[3] for r in latest)
+            assert bearing['runs'] == len(runs)
+            assert bearing['life_used'] == pytest.approx(used, rel=1e-12)
+            assert bearing['running_hours'] == pytest.approx(sum(r[3] for r in runs),
+                                                             rel=1e-9)
+            assert bearing['life_per_running_hour'] == pytest.approx(duty, rel=1e-9)
+            assert bearing['hours_left'] == pytest.approx((1 - used) / duty, rel=1e-9)
+            worst = min(worst or math.inf, bearing['hours_left'])
+        left.append(worst)
+    assert len(machines) == 2 and left == sorted(left)
+    assert [m['rank'] for m in machines] == [1, 2]
+    assert main(['trends', str(results), '--rank', 'life']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ['rank', 'machine', 'bearing', 'life', 'used', 'per', 'running',
+                                'hour', 'hours', 'left', 'rating', 'life', 'reached', 'runs',
+                                'last', 'run']
+    first = machines[0]
+    worst = min(first['bearings'], key=lambda b: b['hours_left'])
+    assert lines[1].split()[:6] == ['1', first['machine_id'], worst['support'],
+                                    f"{worst['life_used']:.3g}",
+                                    f"{worst['life_per_running_hour']:.3g}",
+                                    f"{worst['hours_left']:.4g}"]
