@@ -550,3 +550,90 @@ def test_fleet_sums_each_machines_bearing_life_and_ranks_by_hours_left(tmp_path,
                                     f"{worst['life_used']:.3g}",
                                     f"{worst['life_per_running_hour']:.3g}",
                                     f"{worst['hours_left']:.4g}"]
+
+
+def pinocchio_life_hours(layout, omega, points=360):
+    """Each bearing's rating life (h) at ``omega`` from Pinocchio's loads over a turn."""
+    rotor = PinocchioRotor(layout)
+    angles = np.arange(points) * 2 * math.pi / points
+    forces = [rotor.loads(q, omega, 0.0)['supports'] for q in angles]
+    hours = {}
+    for support in layout['supports']:
+        spec = support['bearing']
+        p = 3.0 if spec.get('type', 'ball') == 'ball' else 10.0 / 3.0
+        radial = np.array([math.hypot(*f[support['name']][0][:2]) for f in forces])
+        axial = np.array([abs(f[support['name']][0][2]) for f in forces])
+        load = radial
+        if 'e' in spec:
+            load = np.where(axial > spec['e'] * radial,
+                            spec['X'] * radial + spec['Y'] * axial, radial)
+        rate = np.mean((load / spec['C']) ** p)
+        hours[support['name']] = spec.get('a1', 1.0) * 1e6 / (rate * omega * 3600 / (2 * math.pi))
+    return hours
+
+
+def test_sensitivity_gives_each_bearings_life_and_its_slopes_against_pinocchio(tmp_path,
+                                                                              capsys):
+    # The gantry tilted 15 deg (the rear row takes thrust beyond e): the rating life at the
+    # service speed and its derivative by the counterweights' parameters, against central
+    # differences of Pinocchio's loads over a turn.
+    layout = copy.deepcopy(BEARINGS)
+    tilt = math.radians(15.0)
+    layout['gravity'] = [0.0, -9.80665 * math.cos(tilt), 9.80665 * math.sin(tilt)]
+    layout['supports'][1]['bearing'].update(X=0.35, Y=0.57, e=0.1)
+    target = tmp_path / 'tilted.yaml'
+    target.write_text(yaml.safe_dump(layout))
+    assert main(['sensitivity', str(target), '--json']) == 0
+    found = json.loads(capsys.readouterr().out)
+    assert main(['sensitivity', str(target)]) == 0
+    text = capsys.readouterr().out
+    omega = layout['balancing']['service_speed']
+    nominal = pinocchio_life_hours(layout, omega)
+    assert found['bearings']['omega'] == omega
+    for name, hours in found['bearings']['l10_hours'].items():
+        assert hours == pytest.approx(nominal[name], rel=1e-9)
+    rows = {(r['component'], r['parameter']): r for r in found['parameters']}
+    for component in ('counterweight_rear', 'counterweight_front'):
+        index = next(k for k, c in enumerate(layout['components']) if c['name'] == component)
+        for parameter, step in (('mass', 1e-3), ('radius', 1e-5), ('angle_deg', 1e-3),
+                                ('z', 1e-5)):
+            moved = []
+            for sign in (1, -1):
+                changed = copy.deepcopy(layout)
+                changed['components'][index][parameter] += sign * step
+                moved.append(pinocchio_life_hours(changed, omega))
+            unit = math.radians(1.0) if parameter == 'angle_deg' else 1.0
+            row = rows[(component, parameter.replace('_deg', ''))]
+            for name in nominal:
+                slope = (moved[0][name] - moved[1][name]) / (2 * step * unit)
+                assert row['d_l10_hours'][name] == pytest.approx(slope, rel=1e-5, abs=1e-6 *
+                                                                 nominal[name])
+    hours = found['bearings']['l10_hours']
+    assert (f"bearing rating life at {omega:.4g} rad/s (ISO 281, the layout as designed): "
+            f"front {hours['front']:.4g} h, rear {hours['rear']:.4g} h") in text.splitlines()
+
+
+def test_tolerance_gives_each_bearings_life_spread(capsys):
+    assert main(['sensitivity', 'config/ct_gantry_bearings.yaml', '--tolerances',
+                 'config/ct_gantry_tolerances.yaml', '--json']) == 0
+    slopes = json.loads(capsys.readouterr().out)
+    assert main(['tolerance', 'config/ct_gantry_bearings.yaml', '--tolerances',
+                 'config/ct_gantry_tolerances.yaml', '--samples', '2000', '--json']) == 0
+    stack = json.loads(capsys.readouterr().out)
+    assert [b['support'] for b in stack['bearings']] == ['front', 'rear']
+    for bearing in stack['bearings']:
+        name = bearing['support']
+        assert bearing['l10_hours'] == slopes['bearings']['l10_hours'][name]
+        # The linear worst case: each parameter's slope times its tolerance, summed.
+        assert bearing['worst_case_linear_hours'] == pytest.approx(
+            sum(r['moves_l10_hours'][name] for r in slopes['parameters']), rel=1e-12)
+        assert sum(c['share'] for c in bearing['contributions']) <= 1.0 + 1e-12
+    assert main(['tolerance', 'config/ct_gantry_bearings.yaml', '--tolerances',
+                 'config/ct_gantry_tolerances.yaml', '--samples', '2000']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    front = stack['bearings'][0]
+    most = front['contributions'][0]
+    assert (f"bearing front: rating life {front['l10_hours']:.4g} h at 23.27 rad/s, +- "
+            f"{front['rss_sigma_hours']:.3g} h (RSS sigma), worst case +- "
+            f"{front['worst_case_linear_hours']:.3g} h; most from {most['component']}."
+            f"{most['parameter']} ({most['share'] * 100:.0f} %)") in lines
