@@ -36,7 +36,8 @@ from cvc_balance.physics.engine import loads
 
 MILLION = 1e6
 """Revolutions in ISO 281's unit of life (L10 is in millions of revolutions)."""
-TWO_PI = 2.0 * math.pi
+PI, TWO_PI = math.pi, 2.0 * math.pi
+sqrt = math.sqrt      # one name to look up per sample, not two
 HALF_TURN = 0.5 / TWO_PI
 """Half the turns of an angle (rad): the trapezoid's weight."""
 HOUR = 3600.0
@@ -209,17 +210,29 @@ class LifeCounters:
             if counter is None or counter.bearing != support.bearing:
                 counter = LifeCounter(support.name, support.bearing)
             self.counters[support.name] = counter
-        self.last = last
+        # The step from the last sample counts only when every bearing has its last load.
+        known = all(c.last_rate is not None for c in self.counters.values())
+        self.last = last if known else None
         self._constants = tuple(
             (c, name, c.bearing.X, c.bearing.Y, c.bearing.e, c.inverse, c.cube, c.exponent)
             for name, c in self.counters.items())        # what add_sample reads, at hand
+        self._half_turns = self._seconds = 0.0     # shared by the counters, not yet added
 
     def __bool__(self):
         """Tell whether any support has a bearing to count."""
         return bool(self.counters)
 
+    def flush(self):
+        """Add the revolutions and seconds counted one sample at a time to every counter."""
+        if self._half_turns or self._seconds:
+            for counter in self.counters.values():
+                counter.revolutions += 2.0 * self._half_turns
+                counter.seconds += self._seconds
+            self._half_turns = self._seconds = 0.0
+
     def restart(self):
         """Forget the last sample: the next starts anew (a new time line, a gap)."""
+        self.flush()
         self.last = None
         for counter in self.counters.values():
             counter.last_rate = None
@@ -230,32 +243,33 @@ class LifeCounters:
 
         ``time`` s, ``angle`` rad, ``omega`` rad/s; ``supports``: {name: (force, moment)}
         as :class:`~cvc_balance.physics.engine.SampleLoads` holds them, stator frame.
+        The revolutions and seconds reach the counters at :meth:`flush` (:meth:`uses`
+        flushes).
         """
         last = self.last
         self.last = (time, angle, omega)
         if last is None:
-            half = elapsed = 0.0
+            half = None
         else:
             elapsed = time - last[0]
             step = angle - last[1]
             drift = (omega + last[2]) * 0.5 * elapsed - step
-            if drift > math.pi or drift < -math.pi:      # whole turns (a wrap) in between
+            if drift > PI or drift < -PI:      # whole turns (a wrap) in between
                 step += TWO_PI * round(drift / TWO_PI)
             half = (step if step >= 0.0 else -step) * HALF_TURN      # half the turns
+            self._half_turns += half
+            self._seconds += elapsed
         for counter, name, x, y, e, inverse, cube, exponent in self._constants:
             fx, fy, fz = supports[name][0]
-            radial = math.sqrt(fx * fx + fy * fy)
+            radial = sqrt(fx * fx + fy * fy)
             axial = fz if fz >= 0.0 else -fz
             if e is None or axial > e * radial:
                 radial = x * radial + y * axial
             ratio = radial * inverse
             rate = ratio * ratio * ratio if cube else ratio ** exponent
-            previous = counter.last_rate
+            if half is not None:
+                counter.damage += (rate + counter.last_rate) * half
             counter.last_rate = rate
-            if previous is not None:
-                counter.damage += (rate + previous) * half
-                counter.revolutions += half + half
-                counter.seconds += elapsed
 
     def add(self, time, angle, omega, support_force):
         """
@@ -265,6 +279,7 @@ class LifeCounters:
         N} as :class:`~cvc_balance.physics.engine.Loads` holds them. Returns {name: (n,)
         cumulative life used at each sample} (for plots).
         """
+        self.flush()
         time, angle, omega = (np.asarray(v, dtype=float) for v in (time, angle, omega))
         if not len(time):
             return {name: np.zeros(0) for name in self.counters}
@@ -274,22 +289,18 @@ class LifeCounters:
                                                                            (time, angle, omega)))
         steps = turns(time, angle, omega)
         elapsed = np.diff(time)
+        revolutions, seconds = float(steps.sum()), float(elapsed.sum())
         out = {}
         for name, counter in self.counters.items():
             rate = load_rate(counter.bearing, support_force[name])
-            counted_steps, counted_time = steps, elapsed
-            if joined:
-                previous = counter.last_rate
-                rate = np.concatenate([[rate[0] if previous is None else previous], rate])
-                if previous is None:      # a bearing new to the count: from its first sample
-                    counted_steps, counted_time = steps.copy(), elapsed.copy()
-                    counted_steps[0] = counted_time[0] = 0.0
-            damage = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * counted_steps)
+            if joined:       # every counter has its last load (see __init__, restart)
+                rate = np.concatenate([[counter.last_rate], rate])
+            damage = np.cumsum(0.5 * (rate[1:] + rate[:-1]) * steps)
             used = (counter.damage + np.concatenate([[0.0], damage])) / MILLION \
                 / counter.bearing.a1
             counter.damage += float(damage[-1]) if len(damage) else 0.0
-            counter.revolutions += float(counted_steps.sum())
-            counter.seconds += float(counted_time.sum())
+            counter.revolutions += revolutions
+            counter.seconds += seconds
             counter.last_rate = float(rate[-1])
             out[name] = used[1:] if joined else used
         self.last = (float(time[-1]), float(angle[-1]), float(omega[-1]))
@@ -297,6 +308,7 @@ class LifeCounters:
 
     def uses(self):
         """Return {support name: LifeUse} of what was counted."""
+        self.flush()
         return {name: counter.use() for name, counter in self.counters.items()}
 
 

@@ -123,6 +123,8 @@ class BearingLife:
             self.stored[support.name] = LifeCounter(support.name, bearing, *counts)
             self.base.setdefault(support.name, counts)
         previous = self.counting
+        if previous is not None:
+            previous.flush()
         # The stored counters go on: a support that keeps its name and bearing keeps its count.
         counting = LifeCounters(supports, self.stored,
                                 previous.last if previous is not None else None)
@@ -137,6 +139,8 @@ class BearingLife:
         """Write the state file (if kept): under a temporary name, then renamed."""
         if self.path is None or not self.stored:
             return
+        if self.counting is not None:
+            self.counting.flush()
         data = {'kind': KIND, 'version': VERSION,
                 'saved_utc': datetime.now(timezone.utc).isoformat().replace('+00:00', 'Z'),
                 'supports': {name: {'bearing': asdict(c.bearing), 'revolutions': c.revolutions,
@@ -164,6 +168,7 @@ class BearingLife:
         """
         if self.counting is None:
             return None
+        self.counting.flush()
         level, parts, warnings, values = assessment.OK, [], [], {}
         for name, counter in self.counting.counters.items():
             now = counter.use()
