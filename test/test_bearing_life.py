@@ -45,14 +45,14 @@ class Support:
 
 
 def steady_run(rpm, seconds, rate=2000.0):
-    """Samples of a constant speed: time s, angle rad (wrapped), omega rad/s."""
+    """Return samples of a constant speed: time s, angle rad (wrapped), omega rad/s."""
     omega = rpm * 2.0 * math.pi / 60.0
     time = np.arange(int(seconds * rate) + 1) / rate
     return time, np.remainder(omega * time, 2.0 * math.pi), np.full(len(time), omega)
 
 
 def counted(bearing, time, angle, omega, force):
-    """The LifeUse of one bearing under ``force`` (n, 3) over the samples, by blocks."""
+    """Return the LifeUse of one bearing under ``force`` (n, 3) over the samples, by blocks."""
     counters = LifeCounters([Support('b', bearing)])
     for a in range(0, len(time), 1000):     # in blocks: the steps between them count too
         counters.add(time[a:a + 1000], angle[a:a + 1000], omega[a:a + 1000],
@@ -148,7 +148,7 @@ def test_static_and_rotating_load_against_quadrature_over_the_angle():
 
 
 def bearings_layout():
-    """The pipeline gantry of test_pipeline_reference, with a large unbalance and bearings."""
+    """Return the pipeline gantry of test_pipeline_reference, a large unbalance, bearings."""
     layout = {
         'name': 'life_gantry', 'gravity': [0.0, -9.80665, 0.0],
         'components': [
@@ -172,7 +172,7 @@ def bearings_layout():
 
 @pytest.fixture(scope='module')
 def pinocchio_run(tmp_path_factory):
-    """A spin-up bag of the bearings layout and the command's JSON of it."""
+    """Write a spin-up bag of the bearings layout; return it and its motion."""
     folder = tmp_path_factory.mktemp('life')
     layout = bearings_layout()
     stamps, angle, omega = ramp(0.5, 3.0, rate=200.0, seconds=8.0)
@@ -234,9 +234,10 @@ def test_text_says_each_bearing_and_what_the_unbalance_costs(pinocchio_run, caps
     assert lines[0].startswith(f"bag {pinocchio_run['bag']}: bearing life per layout segment")
     assert lines[1].startswith("layout 'life_gantry' (")
     front, rear = record
-    assert lines[2] == (f"  bearing front (ball, C 40000 N): {front['revolutions']:.1f} "
-                        f"revolutions in {front['layout']['l10_hours'] * front['layout']['life_used']:.4g} h")
     layout = front['layout']
+    hours = layout['l10_hours'] * layout['life_used']
+    assert lines[2] == (f"  bearing front (ball, C 40000 N): {front['revolutions']:.1f} "
+                        f'revolutions in {hours:.4g} h')
     assert lines[3] == (f"    layout:   P_m {layout['equivalent_load_N']:.6g} N, life used "
                         f"{layout['life_used']:.4g}, L10 {layout['l10_hours']:.4g} h at this "
                         f"duty; this unbalance uses {100 * layout['unbalance_share']:.3g} % "
@@ -324,7 +325,8 @@ def test_load_cells_measure_the_true_rotors_life(tmp_path, capsys):
     assert main(['simulate', str(tmp_path / 'run.yaml'), '-o', bag]) == 0
     capsys.readouterr()
     lives = {}
-    for name, extra in (('declared', []), ('true', ['--layout-file', str(tmp_path / 'true.yaml')])):
+    true_file = ['--layout-file', str(tmp_path / 'true.yaml')]
+    for name, extra in (('declared', []), ('true', true_file)):
         assert main(['life', bag, '--json', *extra]) == 0
         lives[name] = {s['name']: s for s in
                        json.loads(capsys.readouterr().out)['segments'][0]['supports']}
@@ -343,7 +345,7 @@ def test_load_cells_measure_the_true_rotors_life(tmp_path, capsys):
 
 
 def node_life(probe):
-    """The last 'bearing life' status the node sent, and its values (None: none yet)."""
+    """Return the last 'bearing life' status the node sent and its values (None: none)."""
     for array in reversed(probe.received['/diagnostics']):
         for status in array.status:
             if status.name.endswith(': bearing life'):
@@ -572,8 +574,7 @@ def pinocchio_life_hours(layout, omega, points=360):
     return hours
 
 
-def test_sensitivity_gives_each_bearings_life_and_its_slopes_against_pinocchio(tmp_path,
-                                                                              capsys):
+def test_sensitivity_gives_each_bearings_life_and_slopes_against_pinocchio(tmp_path, capsys):
     # The gantry tilted 15 deg (the rear row takes thrust beyond e): the rating life at the
     # service speed and its derivative by the counterweights' parameters, against central
     # differences of Pinocchio's loads over a turn.

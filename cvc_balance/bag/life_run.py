@@ -103,7 +103,8 @@ def support_records(segment, identified=None, of_record=None):
     ``identified``: the segment's IdentifiedSegment when the bag has load cells, and
     ``of_record`` its verdict of record. Each record: name, bearing, revolutions,
     ``layout`` and ``measured`` (null without a cell that can tell), each
-    :meth:`~cvc_balance.physics.bearing_life.LifeUse.record` (equivalent_load_N, life_used, l10_hours, unbalance_share).
+    :meth:`~cvc_balance.physics.bearing_life.LifeUse.record` (equivalent_load_N,
+    life_used, l10_hours, unbalance_share).
     """
     if segment.life is None:
         return None
@@ -167,4 +168,3 @@ def _use_text(use, bearing):
         text += (f'; this unbalance uses {100.0 * share:.3g} % more of its life than the '
                  'rotor balanced')
     return text
-

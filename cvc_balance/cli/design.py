@@ -215,7 +215,7 @@ def _life(model, omega):
 
 
 def _life_lines(summary, tolerances, layout, shown=5):
-    """The bearings' block of sensitivity's text: their life, what moves it most."""
+    """Return the bearings' block of sensitivity's text: their life, what moves it most."""
     bearings = summary['bearings']
     hours = bearings['l10_hours']
     lines = ['', f"bearing rating life at {bearings['omega']:.4g} rad/s (ISO 281, the layout "
@@ -341,7 +341,7 @@ def _tolerance_summary(layout, result, allocation):
 
 
 def _life_stack(model, omega, tolerances):
-    """The bearings' rating life under the tolerances, linearised (None: no speed, bearing)."""
+    """Return the bearings' rating life under the tolerances, linearised (or None)."""
     from cvc_balance.design.life import life_stack
     life = _life(model, omega)
     if life is None:

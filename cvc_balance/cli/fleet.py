@@ -197,7 +197,7 @@ def _row(rank, trend):
 
 
 def _life_row(rank, trend):
-    """A machine's line ranked by bearing life: its bearing with the fewest hours left."""
+    """Return a machine's line ranked by bearing life: the bearing with fewest hours left."""
     worst = trend.worst_bearing
 
     def number(value, form):

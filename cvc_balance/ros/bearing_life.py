@@ -205,4 +205,3 @@ class BearingLife:
             level = assessment.WARN
         message = 'bearing life: ' + '; '.join(warnings + parts)
         return level, message, values
-
