@@ -85,6 +85,9 @@ def canonical_by_asdict(layout):
         for key in ('first_hole', 'numbering', 'rotation'):
             if plane_sites[key] is None:
                 del plane_sites[key]
+    for support in data['supports']:
+        if support['bearing'] is None:
+            del support['bearing']
     return json.dumps(data, sort_keys=True, separators=(',', ':'))
 
 

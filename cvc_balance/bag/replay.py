@@ -20,6 +20,7 @@ from cvc_balance.bag.rosbag2 import open_bag, open_writer
 from cvc_balance.identify.mistakes import run_motion_findings
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
+from cvc_balance.physics.bearing_life import balanced, LifeCounters
 from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.frames import ROTOR_FRAME, STATOR_FRAME, wrap_angle
 from cvc_balance.physics.layout import LayoutError
@@ -61,6 +62,8 @@ class Segment:
     first_ns: int = None       # log times of its first and last sample (None: no sample)
     last_ns: int = None
     model: object = None       # the full RotorModel of the layout (the verdict's)
+    life: object = None        # LifeCounters of its bearings (None: the layout has none)
+    balanced_life: object = None   # the same run's of the rotor balanced
 
 
 @dataclass(frozen=True)
@@ -258,6 +261,10 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
             segment.choice = choose_model(layout, tolerance, envelope)
             model = segment.choice.model
         summary.segments.append(segment)
+        life = LifeCounters(layout.supports)
+        if life:        # the bearings' life: of this run, and of the rotor balanced
+            segment.life, segment.balanced_life = life, LifeCounters(layout.supports)
+            quiet = balanced(model)
         blocks = OutputBlocks(writer, channels, model) if writer else None
         if observer is not None:
             first = np.searchsorted(log_time, start_ns)
@@ -267,6 +274,11 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
             b = min(a + BLOCK, hi)
             result = loads(model, angle[a:b], omega[a:b], alpha[a:b])
             _account(segment, model, result, omega[a:b])
+            if segment.life is not None:
+                seconds = stamp[a:b] * 1e-9
+                segment.life.add(seconds, angle[a:b], omega[a:b], result.support_force)
+                segment.balanced_life.add(seconds, angle[a:b], omega[a:b], loads(
+                    quiet, angle[a:b], omega[a:b], alpha[a:b]).support_force)
             if blocks:
                 blocks.write(result, stamp[a:b], log_time[a:b], omega[a:b])
             if observer is not None:

@@ -13,6 +13,7 @@ from datetime import datetime, timezone
 import math
 
 from cvc_balance.bag.identify_run import identify_bag
+from cvc_balance.bag.life_run import life_lines, support_records
 from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
 from cvc_balance.bag.replay import InputCheck, replay
 from cvc_balance.bag.rosbag2 import open_bag
@@ -152,6 +153,7 @@ def segment_record(segment, identified=None):
             'force_N': choice.deviation.force, 'moment_Nm': choice.deviation.moment,
             'torque_Nm': choice.deviation.torque},
         'identified': None,
+        'life': support_records(segment, identified, of_record),
     }
     if identified is not None:
         record['identified'] = identified_record(identified, of_record)
@@ -285,6 +287,8 @@ def _segment_lines(segment):
     lines.append(f"  peak load on the stator {segment['peak_load_N']:.1f} N; per support: "
                  + peaks)
     lines += [f'  warning: {warning}' for warning in segment['warnings']]
+    if segment.get('life'):
+        lines += life_lines(segment['life'], segment['top_speed'])
     if segment['model_deviation'] is not None:
         lines.append(f"  {segment['model_choice']}")
     return lines

@@ -17,8 +17,8 @@ from cvc_balance.physics.layout import LayoutError, one_line
 
 EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of stdout went away (128 + SIGPIPE, as the shell reports it)."""
-COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'field', 'readings',
-                   'fleet', 'bench')
+COMMAND_MODULES = ('solve', 'design', 'bags', 'reindex', 'identify', 'life', 'field',
+                   'readings', 'fleet', 'bench')
 """Modules of this package that add commands, in the order ``--help`` lists them."""
 
 

@@ -9,6 +9,8 @@ prints them); angles in degrees where people type or read them.
 
 import math
 
+import numpy as np
+
 from cvc_balance.cli.arguments import (add_bounded, finite, input_file, print_json,
                                        staged_outputs)
 from cvc_balance.design.parameters import design_parameter, parse_parameter, PARAMETERS, UNITS
@@ -29,8 +31,10 @@ def register(commands):
         'sensitivity', help='exact derivatives of the balance for every design parameter',
         description='For every component and parameter (mass kg, radius m, angle rad, z m): '
         'the derivative of each correction plane\'s unbalance vector, of the static and the '
-        'couple unbalance (and, with a speed, of each support\'s unbalance load), ranked by '
-        'how far a typical tolerance moves the worse plane.')
+        'couple unbalance (and, with a speed, of each support\'s unbalance load and, where '
+        'the layout describes the supports\' bearings, of each bearing\'s ISO 281 rating '
+        'life at that speed, in hours), ranked by how far a typical tolerance moves the '
+        'worse plane.')
     _layout_argument(sensitivity)
     add_bounded(sensitivity, '--omega', limit=limits.SPEED, metavar='W',
                 help="speed for the loads and the grade, rad/s (default: the layout's service "
@@ -48,6 +52,8 @@ def register(commands):
         description='The residual unbalance per correction plane under the tolerances of '
         'TOL: its Monte-Carlo distribution, the linearised RSS sigma, the worst case, the '
         'probability of meeting the grade and the tolerances that contribute most; with '
+        'a speed and bearings described (supports[].bearing), each bearing\'s rating life '
+        'and its linearised spread; with '
         '--target-probability, which tolerances to tighten to reach it at least cost.')
     _layout_argument(tolerance)
     tolerance.add_argument('--tolerances', type=input_file, required=True, metavar='TOL',
@@ -130,6 +136,7 @@ def run_sensitivity(args):
                   else typical_tolerances(layout))
     model = RotorModel.from_layout(layout)
     sens = sensitivities(model, omega)
+    life = _life(model, omega)
     nominal = sens.nominal
     judged = nominal.planes if nominal.planes is not None else nominal.static[None, :]
     d_judged = sens.planes if sens.planes is not None else sens.static[:, None, :]
@@ -156,6 +163,11 @@ def run_sensitivity(args):
         if sens.supports is not None:
             row['d_supports_N'] = {s.name: _listed(sens.supports[i, k])
                                    for k, s in enumerate(layout.supports)}
+        if life is not None:
+            row['d_l10_hours'] = {name: float(life.d_hours[i, k])
+                                  for k, name in enumerate(life.supports)}
+            row['moves_l10_hours'] = {name: abs(float(life.d_hours[i, k])) * flat_tolerance[i]
+                                      for k, name in enumerate(life.supports)}
         if args.norms:
             slopes = {}
             if sens.planes is not None:
@@ -181,13 +193,51 @@ def run_sensitivity(args):
                     'permissible_g_mm': None if allowed is None
                     else [a * G_MM for a in allowed]},
         'tolerances': args.tolerances or 'typical',
+        'bearings': None if life is None else {
+            'omega': omega, 'l10_hours': dict(zip(life.supports, life.hours))},
         'parameters': rows,
     }
     if args.json:
         print_json(summary)
         return 0
     print(_sensitivity_table(summary, tolerances, layout))
+    if life is not None:
+        print(_life_lines(summary, tolerances, layout))
     return 0
+
+
+def _life(model, omega):
+    """Return the bearings' LifeSensitivity at ``omega``, or None (no speed, no bearing)."""
+    from cvc_balance.design.life import life_sensitivity
+    if omega is None or not omega > 0.0:
+        return None
+    return life_sensitivity(model, omega)
+
+
+def _life_lines(summary, tolerances, layout, shown=5):
+    """Return the bearings' block of sensitivity's text: their life, what moves it most."""
+    bearings = summary['bearings']
+    hours = bearings['l10_hours']
+    lines = ['', f"bearing rating life at {bearings['omega']:.4g} rad/s (ISO 281, the layout "
+             'as designed): ' + ', '.join(f'{name} {h:.4g} h' if h is not None else
+                                          f'{name} no load' for name, h in hours.items())]
+    for name in hours:
+        rows = sorted(summary['parameters'], key=lambda r: -r['moves_l10_hours'][name])
+        lines.append(f'what moves the {name} bearing\'s life most (by its tolerance; per '
+                     'unit):')
+        for row in rows[:shown]:
+            p = design_parameter(layout, row['component'], row['parameter'])
+            tolerance = describe(tolerances, p.index, p.column) if row['tolerance'] > 0 \
+                else 'exact'
+            slope = row['d_l10_hours'][name]
+            unit = row['unit']
+            step = ''
+            if row['parameter'] == 'mass':
+                step = f'; 0.1 kg more: {0.1 * slope:+.4g} h'
+            lines.append(f"  {row['component'] + '.' + row['parameter']:32}{tolerance:24}"
+                         f"{row['moves_l10_hours'][name]:>10.4g} h   ({slope:+.4g} h/{unit}"
+                         f'{step})')
+    return '\n'.join(lines)
 
 
 def _sensitivity_table(summary, tolerances, layout):
@@ -239,6 +289,7 @@ def run_tolerance(args):
         allocation = allocate(model, tolerances, target, args.samples, args.seed, omega)
     result = analyse(model, tolerances, args.samples, args.seed, omega)
     summary = _tolerance_summary(layout, result, allocation)
+    summary['bearings'] = _life_stack(model, result.omega, tolerances)
     if args.json:
         print_json(summary)
     else:
@@ -289,6 +340,24 @@ def _tolerance_summary(layout, result, allocation):
     return summary
 
 
+def _life_stack(model, omega, tolerances):
+    """Return the bearings' rating life under the tolerances, linearised (or None)."""
+    from cvc_balance.design.life import life_stack
+    life = _life(model, omega)
+    if life is None:
+        return None
+    out = []
+    for name, hours, sigma, worst, shares in life_stack(life, tolerances):
+        order = np.argsort(-shares, kind='stable')
+        out.append({'support': name, 'omega': omega, 'l10_hours': hours,
+                    'rss_sigma_hours': sigma, 'worst_case_linear_hours': worst,
+                    'contributions': [{'component': life.parameters[k].component,
+                                       'parameter': life.parameters[k].name,
+                                       'share': float(shares[k])}
+                                      for k in order[:10] if shares[k] > 0.0]})
+    return out
+
+
 def _tolerance_table(summary, result):
     lines = [f"layout {summary['layout']['name']}: {summary['samples']} draws (seed "
              f"{summary['seed']})" + ('' if summary['omega'] is None else
@@ -311,6 +380,13 @@ def _tolerance_table(summary, result):
               f"{summary['judging_plane']}):"]
     for c in summary['contributions'][:10]:
         lines.append(f"  {c['component'] + '.' + c['parameter']:34}{c['share'] * 100:6.1f} %")
+    for bearing in summary.get('bearings') or ():
+        most = bearing['contributions'][0] if bearing['contributions'] else None
+        lines.append(f"bearing {bearing['support']}: rating life {bearing['l10_hours']:.4g} h at "
+                     f"{bearing['omega']:.4g} rad/s, +- {bearing['rss_sigma_hours']:.3g} h (RSS "
+                     f"sigma), worst case +- {bearing['worst_case_linear_hours']:.3g} h"
+                     + (f"; most from {most['component']}.{most['parameter']} "
+                        f"({most['share'] * 100:.0f} %)" if most else ''))
     allocation = summary.get('allocation')
     if allocation:
         lines += ['', f"to meet G {summary['grade']:g} with probability "

@@ -4,8 +4,9 @@
 ``fleet PATH... --out RESULTS`` analyses each bag not yet in RESULTS (by content digest)
 on Dask (an embedded LocalCluster, or ``--scheduler``) or in this process, into a Parquet
 table and a table of failures; ``trends RESULTS`` fits each machine's drift per plane and
-ranks the machines by when they leave their grade; ``simulate-fleet`` writes a fleet of
-simulated runs to try both on (the docs' "Watch a fleet").
+ranks the machines by when they leave their grade (``--rank life``: by their bearings'
+life left at the current duty); ``simulate-fleet`` writes a fleet of simulated runs to try
+both on (the docs' "Watch a fleet").
 """
 
 import argparse
@@ -64,6 +65,11 @@ def register(commands):
                         '(ISO 8601, UTC; default: each machine\'s last run)')
     add_bounded(trends, '--top', limit=limits.TOP, metavar='N',
                 help='list only the N most urgent')
+    trends.add_argument('--rank', choices=('grade', 'life'), default='grade',
+                        help='rank the machines by when they leave their grade (default) or '
+                        "by their bearings' life: the running hours a bearing has left at "
+                        'the current duty (the latest layout\'s runs), fewest first; the '
+                        'layouts must describe the bearings (supports[].bearing)')
     trends.add_argument('--json', action='store_true', help='print one JSON object')
     trends.set_defaults(run=_trends)
 
@@ -136,7 +142,7 @@ def _fleet(args):
 
 def _trends(args):
     from cvc_balance.files import check_output
-    from cvc_balance.fleet.trends import machine_trends, trend_summary
+    from cvc_balance.fleet.trends import life_ranked, machine_trends, trend_summary
     if not Path(args.results).is_file():
         raise FileNotFoundError(f'{args.results}: no such results table (make it with '
                                 'cvc-balance fleet PATH --out RESULTS)')
@@ -151,8 +157,11 @@ def _trends(args):
         raise
     if args.machine is not None and not trends:
         raise ValueError(f'{args.results}: no runs of machine {args.machine!r}')
+    if args.rank == 'life':
+        trends = life_ranked(trends)
     shown = trends[:args.top] if args.top else trends
-    rows = [_row(rank, trend) for rank, trend in enumerate(shown, 1)]
+    row = _life_row if args.rank == 'life' else _row
+    rows = [row(rank, trend) for rank, trend in enumerate(shown, 1)]
     if args.output:         # charts and table moved in together once all are written
         from cvc_balance.files import moved_into_when_done
         with moved_into_when_done(args.output) as staging:
@@ -188,6 +197,26 @@ def _row(rank, trend):
             'drift [g mm/day]': drift, 'leaves grade': day(trend.leaves),
             '95 % interval': interval, 'runs': str(trend.runs), 'last run': day(trend.last),
             'last layout change [g mm]': change}
+
+
+def _life_row(rank, trend):
+    """Return a machine's line ranked by bearing life: the bearing with fewest hours left."""
+    worst = trend.worst_bearing
+
+    def number(value, form):
+        return '' if value is None else format(value, form)
+    if worst is None:
+        return {'rank': rank, 'machine': trend.machine_id, 'bearing': 'none described',
+                'life used': '', 'per running hour': '', 'hours left': '',
+                'rating life reached': '', 'runs': str(trend.runs),
+                'last run': f'{trend.last:%Y-%m-%d}'}
+    return {'rank': rank, 'machine': trend.machine_id, 'bearing': worst.support,
+            'life used': f'{worst.life_used:.3g}',
+            'per running hour': number(worst.duty_per_hour, '.3g'),
+            'hours left': number(worst.left_hours, '.4g'),
+            'rating life reached': f'{worst.worn_out:%Y-%m-%d}' if worst.worn_out else
+            ('beyond 10 years' if worst.duty_per_day else ''),
+            'runs': str(worst.runs), 'last run': f'{trend.last:%Y-%m-%d}'}
 
 
 def _table(rows):

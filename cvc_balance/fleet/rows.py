@@ -7,7 +7,11 @@ segments, the segment's numbers, the two correction planes as ``plane_I_*`` and
 ``plane_II_*`` (the layout's), the verdict of record (``level``, ``verdict``,
 ``equivalent_grade``: the measured rotor's when its load cells can tell, ``verdict_source``
 says which) beside the layout's (``layout_*``), and the load cells' identification as
-``identified_*`` and ``residual_*`` (null without cells). Times are UTC timestamps (ns).
+``identified_*`` and ``residual_*`` (null without cells), and the bearings' life (where the
+layout describes them): ``running_hours`` of the segment and ``bearings``, per support its
+life used, rating life at the run's duty, mean equivalent load and what the unbalance cost,
+measured where the verdict of record is the measured rotor's and its cell could tell
+(``source``), else the layout's. Times are UTC timestamps (ns).
 Units as in the record: SI, g mm and degrees where the name says so. The schemas are fixed
 here, so every run of the tool writes the same columns and DuckDB, pandas or Spark read the
 table alike.
@@ -49,6 +53,11 @@ _VERDICT = [('equivalent_grade', pa.float64()), ('finest_grade_met', pa.float64(
 _IDENTIFIED = [('identified_readings', pa.int64()), ('identified_revolutions', pa.float64()),
                ('identifiable', pa.bool_()), ('fit_rms_N', pa.float64())]
 _VECTOR = [('', pa.float64()), ('_angle_deg', pa.float64()), ('_ci95', pa.float64())]
+BEARING = pa.struct([('support', pa.string()), ('life_used', pa.float64()),
+                     ('l10_hours', pa.float64()), ('equivalent_load_N', pa.float64()),
+                     ('unbalance_share', pa.float64()), ('source', pa.string())])
+"""One bearing's use in a segment (:mod:`cvc_balance.bag.life_run`'s record, of record)."""
+_LIFE = [('running_hours', pa.float64()), ('bearings', pa.list_(BEARING))]
 
 RESULT_SCHEMA = pa.schema(
     _RUN + _SEGMENT
@@ -59,7 +68,8 @@ RESULT_SCHEMA = pa.schema(
     + [(f'{what}_plane_{p}_g_mm{suffix}', kind) for what in ('identified', 'residual')
        for p in PLANES for suffix, kind in _VECTOR]
     + [(f'identified_plane_{p}_fraction', pa.float64()) for p in PLANES]
-    + [('identified_equivalent_grade', pa.float64()), ('identified_level', pa.string())])
+    + [('identified_equivalent_grade', pa.float64()), ('identified_level', pa.string())]
+    + _LIFE)
 """Columns of the results table (one row per run and layout segment)."""
 
 FAILURE_SCHEMA = pa.schema([
@@ -119,6 +129,7 @@ def segment_columns(index, segment):
     for p, plane in zip(PLANES, planes):
         for key, _ in _PLANE:
             row[f'plane_{p}_{key}'] = plane[key]
+    row.update(bearing_columns(segment))
     identified = segment['identified']
     if identified is None:
         return row
@@ -141,6 +152,29 @@ def segment_columns(index, segment):
         row['identified_equivalent_grade'] = grade['equivalent_grade']
         row['identified_level'] = grade['level']
     return row
+
+
+def bearing_columns(segment):
+    """
+    Return a segment's ``running_hours`` and ``bearings`` (null where none is described).
+
+    Each bearing's use of record: measured when the segment's verdict of record is the
+    measured rotor's and the bearing's cell told its load, else the layout's.
+    """
+    first, last = segment['first_sample'], segment['last_sample']
+    columns = {'running_hours': None if first is None else (last - first) / 3600.0,
+               'bearings': None}
+    if segment.get('life'):
+        measured = segment['verdict']['source'] == 'measured'
+        columns['bearings'] = []
+        for record in segment['life']:
+            source = 'measured' if measured and record['measured'] is not None else 'layout'
+            use = record[source]
+            columns['bearings'].append({'support': record['name'], 'source': source,
+                                        **{key: use[key] for key in (
+                                            'life_used', 'l10_hours', 'equivalent_load_N',
+                                            'unbalance_share')}})
+    return columns
 
 
 def failure_row(digest, bag, stat, machine, reason, failed_at_ns):

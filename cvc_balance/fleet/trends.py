@@ -23,6 +23,14 @@ does within :data:`HORIZON_DAYS`). A drift whose interval holds 0 projects nothi
 **Steps**: a_new - a_old at each layout change, with its interval: the change that made
 a plane worse. **Urgency**: machines out of their grade now first (worst first), then by
 the earliest projected date, then the rest by how near their limit they are.
+
+**Bearing life** (where the layouts describe the bearings): per machine and support the
+life used summed over the runs (Palmgren-Miner: a fraction of the rating life, measured
+where the verdict of record is the measured rotor's), the running hours, the **current
+duty** (the life used per running hour, and per calendar day, over the runs of the latest
+layout epoch), the running hours left at that duty and the date the bearing reaches its
+rating life at it (within :data:`HORIZON_DAYS`). :func:`life_ranked` ranks the machines by
+the bearing with the fewest hours left.
 """
 
 from dataclasses import dataclass, field
@@ -106,6 +114,37 @@ class MachineTrend:
     worst_plane: str = None
     leaves: datetime = None
     urgency: tuple = ()
+    bearings: list = field(default_factory=list)    # BearingTrend per described bearing
+
+    @property
+    def worst_bearing(self):
+        """Return the BearingTrend with the fewest running hours left (None: none)."""
+        known = [b for b in self.bearings if b.left_hours is not None]
+        if known:
+            return min(known, key=lambda b: b.left_hours)
+        return max(self.bearings, key=lambda b: b.life_used, default=None)
+
+
+@dataclass
+class BearingTrend:
+    """
+    One bearing of one machine over its runs (life used: fractions of its rating life).
+
+    ``duty_per_hour``: life used per running hour, ``duty_per_day`` per calendar day, both
+    over the latest layout epoch's runs (None: not told: no running time, one run);
+    ``left_hours``: running hours left at that duty; ``worn_out``: when the bearing reaches
+    its rating life at the per-day duty (None: not within HORIZON_DAYS, or not told).
+    """
+
+    support: str
+    runs: int
+    measured_runs: int
+    life_used: float
+    hours: float
+    duty_per_hour: float = None
+    duty_per_day: float = None
+    left_hours: float = None
+    worn_out: datetime = None
 
 
 def read_series(results, machine=None):
@@ -172,7 +211,91 @@ def machine_trends(results, machine=None, now=None):
     """
     trends = [fit_machine(name, series, now) for name, series in
               read_series(results, machine).items()]
+    life = read_life(results, machine)
+    for trend in trends:
+        trend.bearings = bearing_trends(life.get(trend.machine_id, {}))
     return sorted(trends, key=lambda trend: trend.urgency)
+
+
+def life_ranked(trends):
+    """Return ``trends`` ranked by bearing life: the fewest running hours left first."""
+    def key(trend):
+        worst = trend.worst_bearing
+        if worst is None:
+            return (2, 0.0, trend.machine_id)
+        if worst.left_hours is None:
+            return (1, -worst.life_used, trend.machine_id)
+        return (0, worst.left_hours, trend.machine_id)
+    return sorted(trends, key=key)
+
+
+def read_life(results, machine=None):
+    """
+    Return {machine: {support: columns (dict of numpy arrays)}} of the bearings, by time.
+
+    DuckDB reads the table's ``bearings`` lists (one row per run segment and bearing),
+    each run counted once as :func:`read_series` does.
+    """
+    import duckdb
+    query = ('WITH runs AS (SELECT machine_id, segment_start, layout_digest, running_hours, '
+             'bearings FROM read_parquet(?) WHERE segment_samples > 0 AND segment_start IS '
+             'NOT NULL AND bearings IS NOT NULL'
+             + (' AND machine_id = ?' if machine is not None else '')
+             + ' QUALIFY row_number() OVER (PARTITION BY machine_id, segment_start, '
+             'layout_digest ORDER BY analysed_at DESC) = 1), '
+             'used AS (SELECT machine_id, segment_start, layout_digest, running_hours, '
+             'unnest(bearings) AS b FROM runs) '
+             'SELECT machine_id, b.support AS support, epoch_ns(segment_start) AS t, '
+             'layout_digest, running_hours AS hours, b.life_used AS life_used, '
+             "b.source = 'measured' AS measured FROM used "
+             'ORDER BY machine_id, support, t, layout_digest')
+    connection = duckdb.connect()
+    try:
+        parameters = [str(results)] + ([machine] if machine is not None else [])
+        found = connection.execute(query, parameters).fetchnumpy()
+    finally:
+        connection.close()
+    out = {}
+    keys = list(zip(np.asarray(found['machine_id'], dtype=object),
+                    np.asarray(found['support'], dtype=object)))
+    for k, (name, support) in enumerate(keys):
+        rows = out.setdefault(str(name), {}).setdefault(str(support), [])
+        rows.append(k)
+    columns = {key: np.asarray(_filled(value)) for key, value in found.items()
+               if key not in ('machine_id', 'support')}
+    return {name: {support: {key: value[rows] for key, value in columns.items()}
+                   for support, rows in supports.items()}
+            for name, supports in out.items()}
+
+
+def bearing_trends(supports):
+    """Return [BearingTrend] of one machine's bearings ({support: columns})."""
+    trends = []
+    for support, series in supports.items():
+        used = np.nan_to_num(series['life_used'].astype(float))
+        hours = np.nan_to_num(series['hours'].astype(float))
+        times = series['t'].astype(np.int64)
+        digests = series['layout_digest']
+        latest = np.ones(len(times), dtype=bool)
+        changes = np.flatnonzero(digests[1:] != digests[:-1]) + 1
+        if len(changes):
+            latest[:changes[-1]] = False
+        trend = BearingTrend(str(support), len(times), int(series['measured'].sum()),
+                             float(used.sum()), float(hours.sum()))
+        recent_used, recent_hours = float(used[latest].sum()), float(hours[latest].sum())
+        if recent_hours > 0.0 and recent_used > 0.0:
+            trend.duty_per_hour = recent_used / recent_hours
+            trend.left_hours = max(1.0 - trend.life_used, 0.0) / trend.duty_per_hour
+        span = (times[latest][-1] - times[latest][0]) / DAY_NS
+        if latest.sum() > 1 and span > 0.0 and recent_used > 0.0:
+            # Each run's life over the days from the first run of the epoch to the last.
+            trend.duty_per_day = float(used[latest][1:].sum()) / span
+            days = max(1.0 - trend.life_used, 0.0) / trend.duty_per_day \
+                if trend.duty_per_day > 0.0 else math.inf
+            if days <= HORIZON_DAYS:
+                trend.worn_out = _date(times[-1] + days * DAY_NS)
+        trends.append(trend)
+    return trends
 
 
 def fit_machine(name, series, now=None):
@@ -318,4 +441,10 @@ def trend_summary(machine):
             'at': iso(c.when), 'from_digest': c.before, 'to_digest': c.after,
             'steps': {p: {'g_mm': number(s), 'ci95_g_mm': number(h)}
                       for p, (s, h) in c.steps.items()}} for c in machine.changes],
+        'bearings': [{
+            'support': b.support, 'runs': b.runs, 'measured_runs': b.measured_runs,
+            'life_used': b.life_used, 'running_hours': b.hours,
+            'life_per_running_hour': number(b.duty_per_hour),
+            'life_per_day': number(b.duty_per_day), 'hours_left': number(b.left_hours),
+            'rating_life_reached': iso(b.worn_out)} for b in machine.bearings],
     }

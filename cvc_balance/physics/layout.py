@@ -100,13 +100,51 @@ class Component:
     inertia: tuple = None
 
 
+BEARING_TYPES = {'ball': 3.0, 'roller': 10.0 / 3.0}
+"""A bearing's type and ISO 281's life exponent p for it."""
+BEARING_FIELDS = ('C', 'type', 'X', 'Y', 'e', 'a1', 'limit_speed')
+"""The fields of a support's ``bearing``, as the layout file names them."""
+
+
+@dataclass(frozen=True)
+class Bearing:
+    """
+    What a support's bearing is, for ISO 281's basic rating life.
+
+    ``C``: the basic dynamic load rating, N (the maker's catalogue); ``type``: 'ball' or
+    'roller' (the life exponent p 3 or 10/3); ``X``, ``Y``: the radial and axial load
+    factors of P = X Fr + Y Fa (default 1 and 0: radial only); ``e``: the Fa / Fr beyond
+    which they hold (up to it P = Fr; None: always); ``a1``: the life adjustment factor
+    for reliability (1: L10, 90 %); ``limit_speed``: the maker's limiting speed, rad/s
+    (None: not said).
+    """
+
+    C: float
+    type: str = 'ball'
+    X: float = 1.0
+    Y: float = 0.0
+    e: float = None
+    a1: float = 1.0
+    limit_speed: float = None
+
+    @property
+    def exponent(self):
+        """Return ISO 281's life exponent p: 3 for ball, 10/3 for roller bearings."""
+        return BEARING_TYPES[self.type]
+
+
 @dataclass(frozen=True)
 class Support:
-    """A bearing on the spin axis at ``z`` (m); ``axial`` takes the thrust."""
+    """
+    A bearing on the spin axis at ``z`` (m); ``axial`` takes the thrust.
+
+    ``bearing``: what the bearing is (:class:`Bearing`), None when the layout does not say.
+    """
 
     name: str
     z: float
     axial: bool = False
+    bearing: Bearing = None
 
 
 @dataclass(frozen=True)
@@ -233,7 +271,7 @@ class Layout:
         fast = getattr(self.components, 'canonical_json', None)   # a ComponentTable's own
         parts = {'balancing': dumps(balancing), 'description': dumps(self.description),
                  'gravity': dumps(self.gravity), 'name': dumps(self.name),
-                 'supports': dumps([asdict(s) for s in self.supports]),
+                 'supports': dumps([_support_record(s) for s in self.supports]),
                  'components': fast() if fast is not None
                  else '[' + ','.join(map(component_json, self.components)) + ']'}
         for k, key in enumerate(sorted(parts)):
@@ -268,6 +306,14 @@ class Layout:
         radius = max((c.shape.extent / 2 for _, c in self.bodies if c.shape is not None),
                      default=0.0)
         return radius if radius >= least else 0.0
+
+
+def _support_record(support):
+    """Return a support as its canonical mapping: ``bearing`` only when given (old digests)."""
+    record = asdict(support)
+    if support.bearing is None:
+        del record['bearing']
+    return record
 
 
 def _json_string(text):
@@ -568,7 +614,7 @@ def _supports(value):
         _mapping(item, where)
         if isinstance(item.get('name'), str) and item['name']:
             where = f"support {short(item['name'])}"
-        _known_keys(item, ('name', 'z', 'axial'), where)
+        _known_keys(item, ('name', 'z', 'axial', 'bearing'), where)
         name = _text(_required(item, 'name', where), f'{where}: field name', limit=MAX_NAME)
         if not SUPPORT_NAME.fullmatch(name):
             raise LayoutError(f'{where}: field name must be a ROS name token (letters, digits '
@@ -578,7 +624,8 @@ def _supports(value):
         axial = item.get('axial', False)
         if not isinstance(axial, bool):
             raise LayoutError(f'{where}: field axial must be true or false, got {short(axial)}')
-        supports.append(Support(name, z, axial))
+        bearing = _bearing(item['bearing'], where) if 'bearing' in item else None
+        supports.append(Support(name, z, axial, bearing))
     _unique([s.name for s in supports], 'support')
     if len(supports) == 2:
         if supports[0].z == supports[1].z:
@@ -589,6 +636,29 @@ def _supports(value):
             raise LayoutError('layout: field supports: mark exactly one of the two supports '
                               'axial: true (it takes the axial force)')
     return tuple(supports)
+
+
+def _bearing(spec, where):
+    """Validate a support's ``bearing`` mapping into a :class:`Bearing`."""
+    where = f'{where}: field bearing'
+    _mapping(spec, where)
+    _known_keys(spec, BEARING_FIELDS, where)
+    rating = _number(_required(spec, 'C', where), f'{where}.C', limits.LOAD_RATING)
+    kind = spec.get('type', 'ball')
+    if not isinstance(kind, str) or kind not in BEARING_TYPES:
+        raise LayoutError(f'{where}.type: unknown bearing type {short(kind)}, expected one of '
+                          f'{", ".join(BEARING_TYPES)} (life exponent 3 or 10/3)')
+    factors = {key: _number(spec[key], f'{where}.{key}', limits.LOAD_FACTOR)
+               for key in ('X', 'Y') if key in spec}
+    if factors.get('X', 1.0) == 0.0 and factors.get('Y', 0.0) == 0.0:
+        raise LayoutError(f'{where}: X and Y are both 0: the equivalent load would be 0 '
+                          '(radial only: X 1, Y 0)')
+    e = _number(spec['e'], f'{where}.e', limits.LIMIT_RATIO) if 'e' in spec else None
+    a1 = _number(spec.get('a1', 1.0), f'{where}.a1', limits.RELIABILITY_FACTOR)
+    speed = None
+    if 'limit_speed' in spec:
+        speed = _number(spec['limit_speed'], f'{where}.limit_speed', limits.LIMITING_SPEED)
+    return Bearing(rating, kind, factors.get('X', 1.0), factors.get('Y', 0.0), e, a1, speed)
 
 
 def _balancing(spec):

@@ -113,6 +113,22 @@ WEIGHT_MASS = Limit(1e-6, MAX_MAGNITUDE, 'kg', 'a milligram or more: a plan coun
 WARN_FRACTION = Limit(0.01, 1.0, '', 'of the grade')
 """The fraction of the grade beyond which the verdict warns."""
 
+# -- bearings (a support's ``bearing``: ISO 281's basic rating life) --------------------
+
+LOAD_RATING = Limit(1.0, 1e9, 'N', "a newton or more: the loads are divided by it, and "
+                    "the largest slewing bearings' C is below 10^8 N")
+"""A bearing's basic dynamic load rating C."""
+LOAD_FACTOR = Limit(0.0, 10.0, '', "ISO 281's factors are below 3, a thrust bearing's "
+                    'up to 10')
+"""A bearing's radial or axial load factor, X or Y."""
+LIMIT_RATIO = Limit(0.01, 10.0, '', "the Fa / Fr at which ISO 281's factors switch")
+"""A bearing's e: beyond Fa / Fr = e, P = X Fr + Y Fa; up to it, P = Fr."""
+RELIABILITY_FACTOR = Limit(0.05, 1.0, '', 'ISO 281 a1: 1 at 90 % reliability (L10), '
+                           '0.05 beyond 99.95 %')
+"""A bearing's life adjustment factor for reliability a1."""
+LIMITING_SPEED = Limit(0.1, 1e5, 'rad/s', "a maker's limiting speed: 1 rpm to 955 000 rpm")
+"""A bearing's limiting speed (``limit_speed``)."""
+
 # -- tolerance files ----------------------------------------------------------------------
 
 LENGTH_TOLERANCE = Limit(0.0, MAX_MAGNITUDE, 'm', 'a +- tolerance, within the positions')

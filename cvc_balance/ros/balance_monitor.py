@@ -19,7 +19,9 @@ rotor the load cells measure once they can tell, else the layout's, labelled; a 
 that is not what its layout says is a WARN at least), what the layout expects, the
 layout's plausibility warnings, the node's counts; STALE when no motion sample came for
 ``stale_after`` seconds (naming the resolved topics); the load cells' measurement; the
-input checks (:mod:`cvc_balance.ros.input_checks`: units, senses, the cells' supports).
+input checks (:mod:`cvc_balance.ros.input_checks`: units, senses, the cells' supports);
+the bearings' life used, where the layout describes them (:mod:`cvc_balance.ros.bearing_life`:
+since start and, when the node records, in all, from a state file beside the recording).
 Statuses are named after the node's fully qualified name, ``hardware_id`` is
 ``machine_id``. Changes of the level are logged once each (WARN and STALE as warnings,
 ERROR as an error, back to OK as info).
@@ -57,6 +59,7 @@ from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
                                         stamp_seconds, StampGate)
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
+from cvc_balance.ros.bearing_life import BearingLife, state_path
 from cvc_balance.ros.executor import spin
 from cvc_balance.ros.input_checks import InputChecks
 from cvc_balance.ros.keyphasor_input import KeyphasorInput
@@ -156,7 +159,9 @@ TOPICS = (
     (topics.UNBALANCE_RESIDUAL, topics.WRENCH_TYPE, 'out', 'measured - layout unbalance, at '
      'each revolution'),
     (topics.DIAGNOSTICS, topics.DIAGNOSTIC_ARRAY_TYPE, 'out', 'every diagnostics_period: the '
-     "verdict of record, the load cells' measurement, the input checks"),
+     "verdict of record, the load cells' measurement, the input checks, the bearings' life "
+     "used (where the layout's supports describe their bearing; kept across restarts in "
+     'bearing_life_<machine>.json beside record_path when the node records)'),
 )
 """The node's topics: what --help lists, and what the node subscribes and publishes."""
 
@@ -268,6 +273,10 @@ class BalanceMonitor(Node):
                                     every=self.params['rerun_every'])
         self._recorder = None
         self._record = {}
+        # The bearings' life: kept across restarts beside the recording, when it records.
+        self._life = BearingLife(state_path(self.params['record_path'], self._hardware_id)
+                                 if self.params['record_path'] else None, self._log_at)
+        self._life_counting = None      # the LifeCounters of the layout in force, if any
         if self.params['record_path']:
             # Inputs and diagnostics through raw subscriptions; the outputs are written as
             # they are published (no second trip through DDS).
@@ -311,6 +320,7 @@ class BalanceMonitor(Node):
         if self._recorder is not None:
             self._recorder.close()
             self._recorder = None
+        self._life.save()
         if self._rerun is not None:
             self._rerun.finish()
             self._rerun = None
@@ -438,11 +448,14 @@ class BalanceMonitor(Node):
         if self._gate.restarted:         # a new time line: the old slope means nothing
             self._alpha.reset()
             self._checks.restart()
+            self._life.restart()
             self.get_logger().warning(f'motion samples moved to a new time line at {time:.9f} '
                                       's (confirmed by two samples)')
         self._last_time = time
         alpha = self._alpha.update(time, omega)
         result = sample_loads(active.model, angle, omega, alpha)
+        if self._life_counting is not None:
+            self._life_counting.add_sample(time, angle, omega, result.supports)
         stator, rotor = self._stator_cdr.encode, self._rotor_cdr.encode
         # The total load first: it is the output latency is measured on.
         bearing = stator(sec, nanosec, result.force_stator, result.moment_stator)
@@ -574,7 +587,9 @@ class BalanceMonitor(Node):
             return
         if self._active is not None:
             self._active.cells.close()
+        self._life.layout(layout.supports)
         self._active = active  # one reference swap: takes effect between two samples
+        self._life_counting = self._life.counting
         self._top_speed = 0.0
         if self._last_input is None:    # STALE counts from the first layout, not the start
             self._started = monotonic()
@@ -631,6 +646,7 @@ class BalanceMonitor(Node):
                             f'(last: {self._last_rejection})')
             statuses += self._measured_status(active, of_record)
             statuses.append(self._input_status(active))
+            statuses += self._life_status()
             if self._rerun is not None and self._last_time is not None:
                 self._rerun.evidence(int(self._last_time * 1e9), of_record)
             quiet = now - (self._last_input if self._last_input is not None else self._started)
@@ -663,6 +679,19 @@ class BalanceMonitor(Node):
             self._log_at({assessment.ERROR: 'error', assessment.WARN: 'warning'}.get(
                 level, 'info'), f'load cells {level}: {message}')
         status = DiagnosticStatus(name=self._status_name('measured unbalance'),
+                                  hardware_id=self._hardware_id,
+                                  level=LEVELS[level], message=message)
+        status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]
+        return [status]
+
+    def _life_status(self):
+        """Return the bearings' life status (and save their count), if any bearing is described."""
+        found = self._life.status(self._top_speed)
+        self._life.save()
+        if found is None:
+            return []
+        level, message, values = found
+        status = DiagnosticStatus(name=self._status_name('bearing life'),
                                   hardware_id=self._hardware_id,
                                   level=LEVELS[level], message=message)
         status.values = [KeyValue(key=k, value=_text(v)) for k, v in values.items()]

@@ -15,7 +15,9 @@ timeline ``time`` (the samples' stamps). Every panel names its units. What it lo
   share (1.0 = that plane's limit, at the speed the verdict is judged at, so speed
   does not squash it); omega and alpha; the drive torque; per support the static
   weight beside the rotating part's amplitude and the peak over a turn
-  (:mod:`cvc_balance.physics.load_parts`).
+  (:mod:`cvc_balance.physics.load_parts`); where the layout describes the supports'
+  bearings, each bearing's life used since the run's start (a fraction of its rating
+  life, :mod:`cvc_balance.physics.bearing_life`, counted over the samples logged).
 * ``polar/<plane>``: a polar diagram per plane in the same fractions: angle grid,
   the 0 deg mark (rotor X), angles counter-clockwise as in the rotor frame (rerun's
   2D views point Y down, so points are drawn at (x, -y)), the tolerance circle
@@ -40,6 +42,7 @@ import rerun.blueprint.encodings as rre
 from cvc_balance.identify.evidence import MEASURED
 from cvc_balance.physics import assessment
 from cvc_balance.physics.assessment import assess_balance, judge_balance, WARN_FRACTION
+from cvc_balance.physics.bearing_life import LifeCounters
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.frames import degrees_360, g_mm, stator_tilt
 from cvc_balance.physics.load_parts import support_load_parts
@@ -106,7 +109,7 @@ def plane_keys(layout):
     return PLANES if layout.correction_planes() is not None else ('static',)
 
 
-def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
+def blueprint(support_names, planes=PLANES, static_range=None, cells=False, life=False):
     """
     Arrange the views: 3D and polar left, two columns of plots, verdict and events right.
 
@@ -114,7 +117,8 @@ def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
     the other, so that each is tall enough for its tick labels and its legend (a legend
     taller than its plot drops entries). ``static_range`` (N, N): the static weight
     plot's axis (a constant line would otherwise be fitted to its rounding). ``cells``:
-    a plot per support's load cell (measured against the layout's prediction).
+    a plot per support's load cell (measured against the layout's prediction); ``life``: a
+    plot of the bearings' life used since the start.
     """
     motion = [rrb.StateTimelineView(origin='verdict_level', name='verdict over time '
                                     '(OK, WARN, ERROR)'),
@@ -135,6 +139,10 @@ def blueprint(support_names, planes=PLANES, static_range=None, cells=False):
                                      name=f'{name} load cell x, less its zero [N]',
                                      plot_legend=rrb.PlotLegend('LeftTop'))
                   for name in support_names]
+    if life:
+        loads.append(rrb.TimeSeriesView(origin='plots/life',
+                                        name='bearing life used since start (of its rating life)',
+                                        plot_legend=rrb.PlotLegend('LeftTop')))
     bounds = rrb.VisualBounds2D(x_range=[-POLAR_BOUNDS[0], POLAR_BOUNDS[0]],
                                 y_range=list(POLAR_BOUNDS[1:]))
     polar = [rrb.Spatial2DView(origin=f'polar/{key}', name=_polar_title(key),
@@ -200,6 +208,8 @@ class RunLogger:
         self._origin_ns = None        # the run's first stamp: 0 s on the views' timeline
         self._warnings, self._changes = (), {}
         self._cells = False
+        self._life = None              # LifeCounters of the bearings in force (None: none)
+        self._life_shown = False       # the blueprint has the life plot
 
     def finish(self):
         """Flush and close the recording."""
@@ -233,7 +243,12 @@ class RunLogger:
         shown = self._static_range
         outside = heaviest > 0.0 and (shown is None or lightest < shown[0]
                                       or heaviest > shown[1])
-        if new or planes != self._planes or outside:
+        life = LifeCounters(model.supports, *((self._life.counters, self._life.last)
+                                              if self._life is not None else ()))
+        self._life = life if life else None
+        grown = life and not self._life_shown
+        self._life_shown = self._life_shown or bool(life)
+        if new or planes != self._planes or outside or grown:
             # The blueprint has a polar view per plane and the static weights' axis.
             self._supports += new
             self._planes = planes
@@ -242,8 +257,12 @@ class RunLogger:
                 self._static_range = (low, high) if shown is None else \
                     (min(low, shown[0]), max(high, shown[1]))
             rec.send_blueprint(blueprint(self._supports, planes, self._static_range,
-                                         self._cells))
+                                         self._cells, self._life_shown))
             self._log_styles(new, planes)
+        for name in life.counters:
+            colour = SUPPORT_COLOURS[self._supports.index(name) % len(SUPPORT_COLOURS)]
+            rec.log(f'plots/life/{name}', rr.SeriesLines(names=[name], colors=[colour],
+                                                         widths=[2.0]), static=True)
         self._model = model
         # The verdict is the full model's (replay --tolerance may hand a reduced one).
         self._full = model if model.own_inertia else RotorModel.from_layout(layout)
@@ -522,7 +541,7 @@ class RunLogger:
         if not self._cells:
             self._cells = True
             self.rec.send_blueprint(blueprint(self._supports, self._planes or PLANES,
-                                              self._static_range, True))
+                                              self._static_range, True, self._life_shown))
         times = self._columns(stamp_ns)
         index = self._supports.index(support) if support in self._supports else 0
         colour = SUPPORT_COLOURS[index % len(SUPPORT_COLOURS)]
@@ -611,6 +630,11 @@ class RunLogger:
         fractions = self._fractions(top, n)
         for key, values in zip(self._planes, fractions):
             scalars[f'plots/unbalance/{key}'] = values
+        if self._life is not None and n:
+            used = self._life.add(np.asarray(stamp_ns, np.int64) * 1e-9, angle, omega,
+                                  result.support_force)
+            for name, values in used.items():
+                scalars[f'plots/life/{name}'] = values
         record = self._record
         if record is not None and record.source == MEASURED and record.measured.assessment:
             for key, fraction in zip(self._planes, record.measured.assessment.fractions):
