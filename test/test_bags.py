@@ -33,6 +33,10 @@ from ros_harness import ros_environment
 from scenario_reference import expected_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
+AGAINST_PINOCCHIO = {'/drive_torque': 2e-12, '/unbalance': 4e-13}
+"""Bounds of a replay's outputs against Pinocchio, of each topic's peak (others 4e-15), as
+measured: loads 1.5e-15 at most, unbalance 1.3e-13 (Pinocchio's centre of mass, S / m, of a
+near-balanced rotor), drive torque 2.8e-13 (alpha from two implementations of the estimator)."""
 BUNDLED = sorted(bag.with_suffix('.yaml') for bag in (ROOT / 'bags').glob('*.mcap'))
 """Scenario files of the bundled bags (bags/X.mcap made from bags/X.yaml: ./dev.sh bags)."""
 JOINT = 'sensor_msgs/msg/JointState'
@@ -175,10 +179,7 @@ def test_offline_replay_matches_pinocchio_sample_by_sample(scenario_file, tmp_pa
         values = np.array([wrench(m) for _, m in got[topic]])
         reference = np.array([expected[stamp_ns(m)][topic] for _, m in got[topic]])
         scale = np.abs(reference).max()
-        # Against Pinocchio, measured of each topic's peak: loads 1.5e-15 at most, unbalance
-        # 1.3e-13 (Pinocchio's centre of mass, S / m, of a near-balanced rotor), drive torque
-        # 2.8e-13 (alpha from two implementations of the estimator).
-        bound = {'/drive_torque': 2e-12, '/unbalance': 4e-13}.get(topic, 4e-15)
+        bound = AGAINST_PINOCCHIO.get(topic, 4e-15)
         assert np.abs(values - reference).max() <= bound * scale, topic
         frame = 'rotor' if topic in ('/unbalance', '/drive_torque') else 'stator'
         assert {m.header.frame_id for _, m in got[topic]} == {frame}
@@ -498,5 +499,5 @@ def test_threaded_zstd_output_read_by_three_readers(tmp_path, monkeypatch):
         assert {f for _, _, f, _ in ours} == {frame}
         values = np.array([w for *_, w in ours])
         reference = np.array([expected[s][topic] for _, s, _, _ in ours])
-        bound = 2e-12 if topic == '/drive_torque' else 4e-15     # as measured there
+        bound = AGAINST_PINOCCHIO.get(topic, 4e-15)
         assert np.abs(values - reference).max() <= bound * np.abs(reference).max(), topic

@@ -382,7 +382,7 @@ def test_machine_id_in_bags_read_by_others(tmp_path):
     (['simulate', 'bags/spin_up_tube_swap.yaml', '-o', 'x.mcap', '--machine-id', 'a b'],
      'machine id'),
     (['simulate-fleet', 'config/ct_gantry.yaml', '-o', 'x', '--steady', '0'],
-     '--steady: must be > 0'),
+     '--steady: must be from 0.01 to 86400 s'),
 ])
 def test_bad_input_one_line_exit_2(argv, says, tmp_path, monkeypatch):
     monkeypatch.chdir(ROOT)
