@@ -112,6 +112,7 @@ def test_info_prints_what_ros2_bag_info_prints(bags, name):
         'Service:           0',
         'Service information: ',
         f'Machine id:        {MACHINE}',
+        'Run:               not labelled',
         'Layouts:           ' + layouts[0], *[pad + line for line in layouts[1:]]]
     assert len(layouts) == 2 and digests[0] != digests[1]     # the tube swap
     assert topics['/joint_states'][0] == 'sensor_msgs/msg/JointState'

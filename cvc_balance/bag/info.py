@@ -5,7 +5,8 @@
 what Jazzy's ``ros2 bag info`` prints (rosbag2_py's ``format_bag_meta_data``: files, bag
 size, storage id, ROS distro, duration, start and end in local time, messages, a line per
 topic with its type, count and serialization format, services), then the machine the bag
-was recorded on (:mod:`cvc_balance.bag.machine`) and the layouts it carries (name,
+was recorded on (:mod:`cvc_balance.bag.machine`), the run of a field-balancing visit it is
+(:mod:`cvc_balance.bag.run_label`) and the layouts it carries (name,
 digest, when each came into force). Counts and times are what this project's reader
 reads of the messages (a damaged or killed recording: what can be read, its problems
 said), not what a summary claims; the ROS distro is that of rosbag2's last ``rosbag2``
@@ -22,6 +23,7 @@ from cvc_balance.bag.machine import bag_custom_data, MACHINE_ID
 from cvc_balance.bag.mcap_reader import Bag, string_samples
 from cvc_balance.bag.rosbag2 import MAX_METADATA_BYTES, METADATA, open_bag, PartsBag, RosbagsBag
 from cvc_balance.bag.rosbag2_metadata import RECORD, SERIALIZED
+from cvc_balance.bag.run_label import label_of
 from cvc_balance.messages import topics
 from cvc_balance.physics.documents import load_document, read_document
 
@@ -68,6 +70,7 @@ class BagInfo:
     end: int = None
     topics: list = field(default_factory=list)
     machine_id: str = None
+    run: object = None          # bag.run_label.RunLabel, None: unlabelled
     layouts: list = field(default_factory=list)
     problems: list = field(default_factory=list)
 
@@ -103,9 +106,11 @@ def bag_info(path):
                                      channel.encoding or 'cdr'))
     if first:
         info.start, info.end = min(first), max(last)
-    info.machine_id = bag_custom_data(path).get(MACHINE_ID)
+    found = bag_custom_data(path)
+    info.machine_id = found.get(MACHINE_ID)
+    info.run, label_problem = label_of(found)
     info.layouts = _layouts(bag)
-    info.problems = list(bag.problems)
+    info.problems = list(bag.problems) + ([label_problem] if label_problem else [])
     return info
 
 
@@ -211,6 +216,7 @@ def format_info(info):
     lines += [f'Service:           {len(services)}',
               'Service information: ' + f'\n{pad}  '.join(services)]
     lines.append(f'Machine id:        {info.machine_id or "none"}')
+    lines.append(f'Run:               {info.run.describe() if info.run else "not labelled"}')
     layouts = [f'{layout.name} {layout.digest} from {seconds(layout.log_time)}'
                if not layout.rejected else
                f'rejected at {seconds(layout.log_time)}: {layout.rejected}'
@@ -235,6 +241,7 @@ def info_record(info):
                       'serialization_format': t.serialization_format}
                      for t in info.topics if t.service_event],
         'machine_id': info.machine_id,
+        'run': info.run.mapping() if info.run else None,
         'layouts': [{'log_time_ns': layout.log_time, 'name': layout.name or None,
                      'digest': layout.digest or None, 'rejected': layout.rejected or None}
                     for layout in info.layouts],

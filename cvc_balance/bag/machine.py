@@ -44,9 +44,16 @@ def check_machine_id(text):
     return text
 
 
-def custom_data(machine_id):
-    """Return the ``custom_data`` of a bag recorded on ``machine_id`` (None: no id)."""
-    return {MACHINE_ID: check_machine_id(machine_id)} if machine_id else None
+def custom_data(machine_id, label=None):
+    """
+    Return the ``custom_data`` of a bag recorded on ``machine_id`` (None: nothing to write).
+
+    ``label``: the run's :class:`cvc_balance.bag.run_label.RunLabel` (None: unlabelled).
+    """
+    data = {MACHINE_ID: check_machine_id(machine_id)} if machine_id else {}
+    if label is not None:
+        data.update(label.custom_data())
+    return data or None
 
 
 def bag_custom_data(path):

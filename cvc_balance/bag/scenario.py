@@ -302,17 +302,19 @@ def _load_cells(spec, layout, path):
                      for name in names}}
 
 
-def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16, machine_id=None):
+def write_bag(scenario, output, compression='zstd', chunk_bytes=1 << 16, machine_id=None,
+              label=None):
     """
     Write the scenario's input bag (.mcap file or rosbag2 directory): /layout, /joint_states.
 
-    ``machine_id``: the machine the run is recorded on, written into the bag
+    ``machine_id``: the machine the run is recorded on, ``label``: what run it is in a
+    field-balancing visit (:mod:`cvc_balance.bag.run_label`), both written into the bag
     (:mod:`cvc_balance.bag.machine`).
     """
     stamps = scenario.stamps_ns()
     angle, omega = scenario.measured()
     with open_writer(output, compression=compression, chunk_bytes=chunk_bytes,
-                     custom_data=custom_data(machine_id)) as writer:
+                     custom_data=custom_data(machine_id, label)) as writer:
         layout_channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
         joint_channel = writer.add_channel('/joint_states', 'sensor_msgs/msg/JointState',
                                            best_effort=True)

@@ -82,6 +82,28 @@ def machine_id(text):
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
+def add_run_label(parser):
+    """Add ``--run KIND`` and ``--trial PLANE:MASS_KG@ANGLE_DEG,RADIUS_M`` (the run's label)."""
+    from cvc_balance.bag.run_label import KINDS
+    parser.add_argument('--run', choices=KINDS, metavar='KIND', dest='run_kind',
+                        help='what run of a field-balancing visit this is, written into the '
+                        f'bag ({", ".join(KINDS)}); calibrate takes a trial run\'s weight '
+                        'from it')
+    parser.add_argument('--trial', metavar='PLANE:MASS_KG@ANGLE_DEG,RADIUS_M',
+                        help='with --run trial: the trial weight on the rotor (kg, degrees '
+                        'from the rotor\'s X axis, m), e.g. I:0.2@0,0.68')
+
+
+def run_label_of(args):
+    """Return the RunLabel of ``--run`` and ``--trial`` (None: not given); ValueError if wrong."""
+    from cvc_balance.bag.run_label import run_label
+    if args.run_kind is None:
+        if args.trial is not None:
+            raise ValueError('--trial goes with --run trial (say what run this is)')
+        return None
+    return run_label(args.run_kind, args.trial)
+
+
 BAG_HELP = 'a bag: .mcap or .db3 file, or rosbag2 directory (metadata.yaml and its files)'
 OUTPUT_BAG_HELP = ('bag to write: a .mcap file, or any other name for a rosbag2 directory '
                    '(as ros2 bag record -o)')

@@ -7,9 +7,10 @@ Heavy modules (rclpy, rerun) are imported by the command that needs them only.
 import argparse
 import sys
 
-from cvc_balance.cli.arguments import (add_bounded, add_input_topics, BAG_HELP, finite,
-                                       input_bag, input_file, input_topics, machine_id,
-                                       OUTPUT_BAG_HELP, print_json, staged_outputs, tolerance)
+from cvc_balance.cli.arguments import (add_bounded, add_input_topics, add_run_label,
+                                       BAG_HELP, finite, input_bag, input_file, input_topics,
+                                       machine_id, OUTPUT_BAG_HELP, print_json, run_label_of,
+                                       staged_outputs, tolerance)
 from cvc_balance.files import check_new_output, check_output
 from cvc_balance.physics import limits
 from cvc_balance.physics.model_choice import Tolerance
@@ -27,6 +28,7 @@ def register(commands):
     simulate.add_argument('--machine-id', type=machine_id, metavar='ID',
                           help='the machine the run is recorded on, written into the bag '
                           '(MCAP metadata; metadata.yaml custom_data for a directory)')
+    add_run_label(simulate)
     simulate.set_defaults(run=_simulate)
 
     replay = commands.add_parser('replay', help='compute a bag\'s outputs offline',
@@ -129,6 +131,7 @@ def register(commands):
     record.add_argument('--machine-id', type=machine_id, metavar='ID',
                         help='the machine recorded, written into the bag (MCAP metadata; '
                         'metadata.yaml custom_data for a directory)')
+    add_run_label(record)
     record.add_argument('--ready-when', action='append', default=[], metavar='TOPIC',
                         help='print "ready" once this topic\'s publisher is matched')
     record.add_argument('--ros-args', nargs=argparse.REMAINDER, default=[],
@@ -138,9 +141,10 @@ def register(commands):
 
 def _simulate(args):
     from cvc_balance.bag.scenario import load_scenario, write_bag
+    label = run_label_of(args)
     with staged_outputs([args.scenario], bags=('bag',), bag=args.output) as out:
         scenario = load_scenario(args.scenario)
-        count = write_bag(scenario, out['bag'], machine_id=args.machine_id)
+        count = write_bag(scenario, out['bag'], machine_id=args.machine_id, label=label)
     print(f'{args.output}: {count} samples over {scenario.time[-1]:.3f} s, '
           f'{len(scenario.layouts)} layouts')
     return 0
@@ -266,5 +270,6 @@ def _info(args):
 
 def _record(args):
     from cvc_balance.ros.recorder import record_main
+    args.run_label = run_label_of(args)
     check_new_output(args.output)    # recorded live, in place (see cvc-balance reindex)
     return record_main(args)

@@ -34,11 +34,12 @@ def register(commands):
         'channels) over whole revolutions at steady speed in a baseline run and one run per '
         'trial weight, and save the influence coefficients (least squares over the runs).')
     calibrate.add_argument('runs', nargs='+', type=input_bag, metavar='RUN',
-                           help='BASELINE then one bag per '
-                           'trial, in the order of --trial')
-    calibrate.add_argument('--trial', action='append', required=True,
+                           help='BASELINE then one bag per trial run')
+    calibrate.add_argument('--trial', action='append', default=[],
                            metavar='PLANE:MASS_KG@ANGLE_DEG,R_M',
-                           help='the trial weight of each trial run, in order (I:0.2@0,0.68)')
+                           help='the trial weight of each trial run, in order (I:0.2@0,0.68); '
+                           'default: the one each run was recorded with (record or simulate '
+                           '--run trial --trial ...)')
     calibrate.add_argument('--keep-trial', action='store_true',
                            help='each trial weight stayed on for the runs after it')
     calibrate.add_argument('--layout-file', type=input_file, metavar='FILE',
@@ -211,13 +212,14 @@ def warn(lines):
 def run_calibrate(args):
     """Run ``cvc-balance calibrate``."""
     from cvc_balance.bag.field_run import calibrate_runs, check_calibration
+    from cvc_balance.bag.run_label import calibration_trials
     from cvc_balance.field.coefficients import calibration_mapping
     from cvc_balance.field.notation import bag_trial
     from cvc_balance.physics.documents import dump_document
 
-    trials = [bag_trial(text) for text in args.trial]
     if len(args.runs) < 2:
         raise ValueError('give the baseline run and one run per trial weight')
+    trials = calibration_trials(args.runs, [bag_trial(text) for text in args.trial])
     if args.output:
         check_output(args.output, args.runs)
     calibration, runs, speed_warnings = calibrate_runs(

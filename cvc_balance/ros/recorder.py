@@ -37,18 +37,19 @@ class BagRecorder:
     """Record topics of a node's graph to ``path`` (see the module's description)."""
 
     def __init__(self, node, path, names=DEFAULT_TOPICS, compression='zstd',
-                 chunk_bytes=1 << 20, machine_id=None):
+                 chunk_bytes=1 << 20, machine_id=None, label=None):
         """
         Subscribe ``node`` to topic ``names`` (or patterns with '*'), write ``path``.
 
         ``path``: a .mcap file, or else a rosbag2 directory (see ``bag.rosbag2``), created:
         an existing name (also a link to a file) is refused with a BagError, never
-        replaced; ``machine_id``: the machine recorded, written into the bag
-        (``bag.machine``).
+        replaced; ``machine_id``: the machine recorded, ``label``: the field-balancing run
+        it is (``bag.run_label``), both written into the bag (``bag.machine``).
         """
         self.node = node
         self.writer = open_writer(path, compression=compression, chunk_bytes=chunk_bytes,
-                                  custom_data=custom_data(machine_id), exclusive=True)
+                                  custom_data=custom_data(machine_id, label),
+                                  exclusive=True)
         self.counts = {}
         self._patterns = []
         self._subscribed = {}
@@ -152,19 +153,19 @@ def record_main(args):
     node = rclpy.create_node('cvc_balance_recorder')
     recorder = BagRecorder(node, args.output, args.topics or DEFAULT_TOPICS,
                            '' if args.compression == 'none' else args.compression,
-                           args.chunk_kib * 1024, args.machine_id)
-    if args.ready_when:
-        # Say 'ready' once the subscriptions have matched a publisher (reader side); a
-        # topic found by a pattern has its subscription once it is discovered.
-        names = [node.resolve_topic_name(t) for t in args.ready_when]
+                           args.chunk_kib * 1024, args.machine_id, args.run_label)
+    try:     # from here on a Ctrl-C still finalises the bag
+        if args.ready_when:
+            # Say 'ready' once the subscriptions have matched a publisher (reader side); a
+            # topic found by a pattern has its subscription once it is discovered.
+            names = [node.resolve_topic_name(t) for t in args.ready_when]
 
-        def check():
-            wanted = [recorder.subscription(name) for name in names]
-            if all(s is not None and s.get_publisher_count() > 0 for s in wanted):
-                print('ready', flush=True)
-                timer.cancel()
-        timer = node.create_timer(0.05, check)
-    try:
+            def check():
+                wanted = [recorder.subscription(name) for name in names]
+                if all(s is not None and s.get_publisher_count() > 0 for s in wanted):
+                    print('ready', flush=True)
+                    timer.cancel()
+            timer = node.create_timer(0.05, check)
         spin(node)
     finally:
         recorder.close()
