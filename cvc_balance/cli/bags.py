@@ -106,8 +106,8 @@ def register(commands):
                                description='Print what ros2 bag info prints of a bag (files, '
                                'size, storage, ROS distro, duration, start and end in local '
                                'time, messages, each topic with its type, count and '
-                               'serialization format), then the machine it was recorded on '
-                               'and its layouts (name, digest, log time they came into '
+                               'serialization format), then the machine it was recorded on, '
+                               'the run it is (record --run) and its layouts (name, digest, log time they came into '
                                'force). Counts and times are of the messages read.')
     info.add_argument('bag', metavar='BAG', help=BAG_HELP)
     info.add_argument('--json', action='store_true',
@@ -115,7 +115,8 @@ def register(commands):
                       'storage_identifier, ros_distro, duration_ns, start_ns, end_ns, '
                       'message_count, topics [{name, type, count, serialization_format}], '
                       'services [{name, type, event_count, serialization_format}], '
-                      'machine_id, layouts [{log_time_ns, name, digest, rejected}], problems')
+                      'machine_id, run {kind, trial} (null: not labelled), '
+                      'layouts [{log_time_ns, name, digest, rejected}], problems')
     info.set_defaults(run=_info)
 
     record = commands.add_parser('record', help='record topics to a bag until Ctrl-C',
