@@ -1,8 +1,8 @@
 """
 The layout: which components sit where on the rotor, and its supports.
 
-This module owns the layout contract (documented in README.md): it turns a
-mapping (parsed from YAML or JSON) into a validated, immutable
+This module owns the layout contract (docs/reference/layout_file.md is written from it): it
+turns a mapping (parsed from YAML or JSON) into a validated, immutable
 :class:`Layout`, or raises :class:`LayoutError` with one line naming the
 component and the field that is wrong. Lengths m, masses kg, angles rad
 (``angle_deg`` accepted at the edge), gravity m/s^2 in the stator frame.
