@@ -862,3 +862,106 @@ def _corrections(run, method, problem, layout, grade, warnings, objective, max_w
                                   time_limit=time_limit, existing=existing))
     return FieldCorrection(run, method, problem, plans, used_sites, radius, grade, warnings,
                            objective, max_weights, check, grades, existing)
+
+
+@dataclass(frozen=True)
+class CoefficientReading:
+    """
+    One layout segment's unbalance from vibration readings through stored coefficients.
+
+    ``segment`` the :class:`Segment`; ``estimate`` the
+    :class:`~cvc_balance.identify.evidence.PlaneEstimate` (None when the coefficients do
+    not fit this segment: ``reason`` one line why); ``run`` the :class:`RunReadings` read
+    (None when nothing was read); ``identity`` the coefficients' record named.
+    """
+
+    segment: Segment
+    estimate: object
+    reason: str
+    run: object
+    identity: dict
+
+
+def coefficients_identity(path, record):
+    """
+    Return the coefficients' record named, as plain data, for the verdict's JSON and text.
+
+    ``file`` (as given), ``sha256`` (the file's bytes, 16 hex digits), ``made`` (the
+    baseline run's date, or None by hand), ``layout`` {name, digest} the record was made
+    on (or None), ``speed`` rad/s (or None), ``sensors`` and ``reading_units``.
+    """
+    import hashlib
+    from pathlib import Path
+    runs = [r for r in record.get('runs') or () if isinstance(r, dict)]
+    return {'file': str(path),
+            'sha256': hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
+            'made': next((r.get('date') for r in runs if r.get('date')), None),
+            'layout': record.get('layout'), 'speed': record.get('speed'),
+            'sensors': list(record.get('sensors') or ()),
+            'reading_units': list(record.get('reading_units') or ())}
+
+
+def coefficient_readings(bag_path, calibration, record, identity, names=None,
+                         layout_file=None, tolerance=DEFAULT_TOLERANCE,
+                         joint_name='gantry_joint'):
+    """
+    Return a :class:`CoefficientReading` per layout segment of a bag: readings = C u solved.
+
+    The coefficients' sensors are read over each segment's longest steady stretch at the
+    record's speed (:func:`read_run`); they fit the segment when they are kg m per
+    planes I and II, made on the segment's layout (same digest, when the record names
+    one), at its speed (:func:`~cvc_balance.field.coefficients.at_speed`: within 0.1 %,
+    or scaled for load cells) and every sensor is in the bag. Else ``reason`` says which,
+    in one line, and the verdict stays the layout's.
+    """
+    from cvc_balance.field.coefficients import plane_unbalance
+    from cvc_balance.identify.evidence import PlaneEstimate
+    bag = open_bag(bag_path)
+    speed = record.get('speed')
+    _, segments, _ = run_segments(bag, joint_name, layout_file, speed, tolerance,
+                                  names=names)
+    file = identity['file']
+    made_on = record.get('layout') if isinstance(record.get('layout'), dict) else None
+    out = []
+    for segment in segments:
+        def unfit(reason, run=None, segment=segment):
+            return CoefficientReading(segment, None, f'coefficients {file}: {reason}', run,
+                                      identity)
+        layout = segment.layout
+        if record.get('correction_unit') != 'kg m' or set(calibration.planes) != {'I', 'II'}:
+            out.append(unfit(f"per {record.get('correction_unit')} in planes "
+                             f"{', '.join(calibration.planes)}, not kg m in planes I and II: "
+                             'no unbalance in g mm'))
+            continue
+        if layout is None or layout.correction_planes() is None:
+            out.append(unfit('the segment has no layout with two correction planes to '
+                             'judge the unbalance in'))
+            continue
+        if made_on and made_on.get('digest') != layout.digest():
+            out.append(unfit(f"made on layout '{made_on.get('name')}' ({made_on.get('digest')}"
+                             f"), this segment's is '{layout.name}' ({layout.digest()}): "
+                             'not this machine type'))
+            continue
+        if segment.longest is None:
+            at = f'the coefficients\' {speed:.4g} rad/s' if speed else 'a steady speed'
+            out.append(unfit(f'no steady stretch at {at} (+-{tolerance:.1%}) in this '
+                             f'segment: {segment.note}'))
+            continue
+        try:
+            run = read_run(bag_path, list(calibration.sensors), speed, tolerance, joint_name,
+                           layout_file, segment=segment.number, names=names)
+            scaled, _ = at_speed(calibration, record, run.window.speed)
+        except ValueError as error:
+            out.append(unfit(str(error).replace(f'{bag.path}: ', '')))
+            continue
+        readings = [run.phasors[n].value for n in calibration.sensors]
+        sigma = [run.phasors[n].sigma for n in calibration.sensors]
+        u, covariance = plane_unbalance(scaled, readings, sigma)
+        order = [calibration.planes.index(p) for p in ('I', 'II')]
+        estimate = PlaneEstimate(
+            tuple(layout.correction_planes()), tuple(complex(u[k]) for k in order),
+            tuple(tuple(complex(covariance[i, j]) for j in order) for i in order),
+            f'the vibration sensors through coefficients {file}', identity,
+            min(p.samples for p in run.phasors.values()))
+        out.append(CoefficientReading(segment, estimate, None, run, identity))
+    return out

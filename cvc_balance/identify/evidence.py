@@ -91,7 +91,7 @@ class PlaneEstimate:
         """Radius of the 95 % circle of w_S S + w_P P (its units)."""
         w_s, w_p = weights
         a = [w_s + z * w_p for z in self.z]        # the same quantity in (u_I, u_II)
-        variance = sum((a[i].conjugate() * self.covariance[i][j] * a[j]).real
+        variance = sum((a[i] * self.covariance[i][j] * a[j].conjugate()).real
                        for i in range(2) for j in range(2))
         return math.sqrt(CHI2_2DOF_95 * max(variance, 0.0))
 LEVEL_ORDER = {assessment.NOT_JUDGED: 0, assessment.OK: 1, assessment.WARN: 2,
