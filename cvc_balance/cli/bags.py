@@ -164,8 +164,8 @@ def _replay(args):
     from cvc_balance.bag.replay import replay
     from cvc_balance.bag.run_summary import format_replay, replay_record
     show = args.progress if args.progress is not None else sys.stderr.isatty()
-    with staged_outputs([args.bag, args.layout_file], bags=('bag',), bag=args.output,
-                        rrd=args.rrd) as out:
+    with staged_outputs([args.bag, args.layout_file, args.coefficients], bags=('bag',),
+                        bag=args.output, rrd=args.rrd) as out:
         # The verdict of record needs the cells' fit first: the text, the JSON and the
         # view all lead with it.
         identified = _identified(args)
