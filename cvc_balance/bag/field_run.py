@@ -518,7 +518,8 @@ class FieldCorrection:
     ``warnings`` one line each; ``objective`` and ``max_weights`` of the optimal plan;
     ``model_check`` the coefficients against the layout's physics (None without
     coefficients); ``segment_grades`` a GradeView or None per segment of the run;
-    ``existing`` the PlacedWeights on already (a trim).
+    ``existing`` the PlacedWeights on already (a trim); ``verdict`` the verdict of record
+    from vibration readings through coefficients (None otherwise).
     """
 
     run: RunReadings
@@ -534,6 +535,7 @@ class FieldCorrection:
     model_check: object = None
     segment_grades: tuple = ()
     existing: tuple = ()
+    verdict: object = None
 
 
 def _check_correction_masses(layout, planes, correction, radius, sites):
@@ -616,7 +618,8 @@ def grade_view(run, joint_name='gantry_joint', segment=None):
 def correct_run(run_path, calibration=None, record=None, layout_file=None,
                 objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
                 joint_name='gantry_joint', time_limit=30.0, segment=None,
-                accept_mismatch=False, speed=None, weights_on=(), names=None):
+                accept_mismatch=False, speed=None, weights_on=(), names=None,
+                identity=None):
     """
     Return the :class:`FieldCorrection` of a run (see the module's description).
 
@@ -632,7 +635,10 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     coefficients.at_speed`). Coefficients that disagree with the layout's physics raise
     ValueError naming the likely mistake, unless ``accept_mismatch``. ``weights_on``: the
     weights bolted on already (:func:`weights_on_sites`): the plans may take them off.
-    ``names``: the run's input topics (a keyphasor instead of the encoder).
+    ``names``: the run's input topics (a keyphasor instead of the encoder); ``identity``
+    the coefficients' record named (:func:`coefficients_identity`): without load cells,
+    the verdict of record is then measured by the vibration sensors through them
+    (``FieldCorrection.verdict``), unless they were made on another layout.
     """
     warnings = []
     speed = speed or (None if record is None else record.get('speed'))
@@ -676,10 +682,61 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
         # The grade limits the plan too: the identified unbalance plus the weights.
         problem = with_unbalance_limits(problem, grade.planes, grade.before,
                                         grade.permissible - np.asarray(grade.ci95))
+    verdict = None
+    if grade is None and identity is not None:
+        grade, verdict = _coefficient_verdict(run, calibration, record, identity, problem,
+                                              layout, warnings)
     elif grade is None:
         grade = coefficient_grade(problem, layout, run.window.speed)
-    return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
-                        objective, max_weights, time_limit, check, grades, weights_on)
+    result = _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
+                          objective, max_weights, time_limit, check, grades, weights_on)
+    result.verdict = verdict
+    return result
+
+
+def _coefficient_verdict(run, calibration, record, identity, problem, layout, warnings):
+    """
+    Return (GradeView or None, VerdictOfRecord or None) of a run read through coefficients.
+
+    The verdict of record measured by the vibration sensors through the coefficients
+    (:func:`~cvc_balance.identify.evidence.verdict_of_record` of a PlaneEstimate); when
+    they were made on another layout (digest) the layout's verdict stands, saying why,
+    and no measured grade is shown.
+    """
+    from cvc_balance.field.coefficients import plane_unbalance
+    from cvc_balance.identify.evidence import PlaneEstimate, verdict_of_record
+    if layout is None or layout.correction_planes() is None or problem.unit != 'kg m' \
+            or set(problem.planes) != {'I', 'II'}:
+        return coefficient_grade(problem, layout, run.window.speed), None
+    model = RotorModel.from_layout(layout)
+    made_on = record.get('layout') if isinstance(record.get('layout'), dict) else None
+    if made_on and made_on.get('digest') != layout.digest():
+        reason = (f"coefficients {identity['file']}: made on layout '{made_on.get('name')}' "
+                  f"({made_on.get('digest')}), this run's is '{layout.name}' "
+                  f'({layout.digest()}): not this machine type')
+        warnings.append(reason)
+        return None, verdict_of_record(model, None, run.window.speed,
+                                       no_measurement=reason, coefficients=identity)
+    by = f"the vibration sensors through coefficients {identity['file']}"
+    grade = coefficient_grade(problem, layout, run.window.speed, by)
+    sensors = list(calibration.sensors)
+    u, covariance = plane_unbalance(calibration, [run.phasors[n].value for n in sensors],
+                                    [run.phasors[n].sigma for n in sensors])
+    order = [calibration.planes.index(p) for p in ('I', 'II')]
+    estimate = PlaneEstimate(
+        tuple(layout.correction_planes()), tuple(complex(u[k]) for k in order),
+        tuple(tuple(complex(covariance[i, j]) for j in order) for i in order), by, identity,
+        min(p.samples for p in run.phasors.values()))
+    verdict = verdict_of_record(model, estimate, run.window.speed)
+    if grade is not None:
+        grade.ci95 = tuple(estimate.ci95(w) for w in plane_weights(estimate.z))
+    return grade, verdict
+
+
+def plane_weights(z):
+    """Return the (w_S, w_P) that pick u_I and u_II out of S and P about O (planes at z)."""
+    span = z[1] - z[0]
+    return ((z[1] / span, -1.0 / span), (-z[0] / span, 1.0 / span))
 
 
 @dataclass
@@ -758,7 +815,7 @@ def _checked(calibration, record, layout, speed, accept_mismatch, warnings):
     return calibration, check
 
 
-def coefficient_grade(problem, layout, speed):
+def coefficient_grade(problem, layout, speed, source='the readings through the coefficients'):
     """
     Return the :class:`GradeView` of the unbalance readings imply through coefficients.
 
@@ -780,7 +837,7 @@ def coefficient_grade(problem, layout, speed):
     u_per = iso21940.permissible_unbalance(layout.balancing.grade, model.mass, service)
     return GradeView(('I', 'II'), tuple(z), before[order], (0.0, 0.0),
                      np.array([u_per * s for s in shares]), layout.balancing.grade, service,
-                     model.mass, shares, 'the readings through the coefficients')
+                     model.mass, shares, source)
 
 
 def weights_on_sites(layout, specs):

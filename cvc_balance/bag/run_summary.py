@@ -217,12 +217,9 @@ def coefficient_record(reading, of_record):
     judged = None if measured is None else measured.assessment
     fractions = list(judged.fractions) if judged is not None and judged.planes \
         else [None, None]
-    for label, z, u, k, fraction in zip(('I', 'II'), estimate.z, estimate.values, (0, 1),
-                                        fractions):
-        # u_I and u_II from (S, P): the weights that pick one plane out.
-        span = estimate.z[1] - estimate.z[0]
-        weights = ((estimate.z[1] / span, -1.0 / span) if k == 0
-                   else (-estimate.z[0] / span, 1.0 / span))
+    from cvc_balance.bag.field_run import plane_weights
+    for label, z, u, weights, fraction in zip(('I', 'II'), estimate.z, estimate.values,
+                                              plane_weights(estimate.z), fractions):
         record['planes'].append({'plane': label, 'z': z, 'g_mm': g_mm(abs(u)),
                                  'angle_deg': degrees_360(math.atan2(u.imag, u.real)),
                                  'ci95_g_mm': g_mm(estimate.ci95(weights)),

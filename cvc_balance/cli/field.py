@@ -608,10 +608,13 @@ def correction_summary(args):
         return summarise(result, record), result
     if args.bag is None:
         raise ValueError('give the run to correct (RUN), or --readings with --coefficients')
+    from cvc_balance.bag.field_run import coefficients_identity
     result = correct_run(args.bag, calibration, record, args.layout, args.objective,
                          args.limit, args.max_weights, args.speed_tolerance / 100.0,
                          args.joint_name, args.time_limit, args.segment, args.accept_mismatch,
-                         args.speed, weights_on, run_inputs(args))
+                         args.speed, weights_on, run_inputs(args),
+                         coefficients_identity(args.coefficients, record)
+                         if args.coefficients else None)
     return summarise(result, record), result
 
 
@@ -772,6 +775,8 @@ def summarise(result, record=None):
         'readings': _readings(run),
         'weights_on': [_placed(w, result.sites) for w in result.existing],
         'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
+        'verdict': None if getattr(result, 'verdict', None) is None
+        else result.verdict.record(),
     }
     if result.method == 'influence coefficients':
         # The sensors' coefficients only: the grade's limits ride along as channels of
@@ -928,6 +933,11 @@ def format_summary(summary):
     lines.append(f"corrections from the {summary['method']}")
     if summary.get('model_check') is not None:
         lines.append(check_line(summary['model_check']))
+    verdict = summary.get('verdict')
+    if verdict is not None:
+        lines.append(f"verdict {verdict['headline']}")
+        if verdict['source'] == 'measured':
+            lines.append(f"  {verdict['layout_expects']}")
     grade = summary['grade']
     if grade is not None:
         before = grade['before']
