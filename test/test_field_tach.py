@@ -211,11 +211,13 @@ def test_correct_from_a_tach_equals_the_encoders_and_cancels_the_truth(runs, coe
         'kind': 'keyphasor', 'topic': '/keyphasor', 'type': 'std_msgs/msg/Float64'}
     text = cli('correct', runs['baseline']['tach'], '--coefficients',
                coefficients['tach'][1], '--keyphasor', '/keyphasor').stdout
-    assert '  angle from the keyphasor /keyphasor (std_msgs/msg/Float64' in text
+    assert text.splitlines()[0].endswith(
+        ' revolutions at 23.27 rad/s, angle from the keyphasor /keyphasor '
+        '(std_msgs/msg/Float64: 0 at each mark, interpolated between marks)'), text
 
 
 def test_a_keyphasor_under_another_name_is_the_motion_not_a_sensor(runs, coefficients,
-                                                                  tmp_path):
+                                                                   tmp_path):
     from tach_bags import merge
     renamed = merge(tmp_path / 'tach_named.mcap', runs['baseline']['tach'],
                     change={'/keyphasor': lambda t, d: ('/rig/tach', d)})

@@ -918,8 +918,8 @@ def format_summary(summary):
     else:
         lines = [f"run {run['bag']} ({run['date']}), layout "
                  + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
-                 + f": {run['revolutions']} revolutions {speed}",
-                 f"  angle from {angle_text(run.get('angle_from'))}"]
+                 + f": {run['revolutions']} revolutions {speed}, angle from "
+                 + angle_text(run.get('angle_from'))]
     segments = summary.get('segments') or []
     for segment in segments:
         used = segment['number'] == run['segment']

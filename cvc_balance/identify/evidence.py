@@ -49,6 +49,8 @@ NO_CELLS = 'no load cells'
 NO_READINGS = 'no load-cell readings while this layout was in force'
 CANNOT_TELL = ('the load cells cannot tell yet: too few readings or revolutions, or no '
                'speed')
+LEVEL_ORDER = {assessment.NOT_JUDGED: 0, assessment.OK: 1, assessment.WARN: 2,
+               assessment.ERROR: 3}
 LOAD_CELLS = 'the load cells'
 """What measured the rotor when an estimate does not say (a load cells' fit)."""
 CHI2_2DOF_95 = 5.991464547107979
@@ -94,8 +96,6 @@ class PlaneEstimate:
         variance = sum((a[i] * self.covariance[i][j] * a[j].conjugate()).real
                        for i in range(2) for j in range(2))
         return math.sqrt(CHI2_2DOF_95 * max(variance, 0.0))
-LEVEL_ORDER = {assessment.NOT_JUDGED: 0, assessment.OK: 1, assessment.WARN: 2,
-               assessment.ERROR: 3}
 
 
 @dataclass(frozen=True)
