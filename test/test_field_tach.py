@@ -80,7 +80,7 @@ def grade_by_hand(parts, planes):
 
 
 def coefficients_by_hand(omega):
-    """Reading (m/s^2) per plane unbalance (kg m) of each accelerometer, by statics."""
+    """Return each accelerometer's reading (m/s^2) per plane unbalance (kg m), by statics."""
     span = SUPPORTS[1] - SUPPORTS[0]
     matrix = np.zeros((len(ACCELEROMETERS), 2), complex)
     for s, name in enumerate(sorted(ACCELEROMETERS)):
