@@ -1,14 +1,17 @@
 """
 Field balancing on recorded runs: each run's 1x readings, the coefficients, the correction.
 
-A run is a bag with the encoder (``joint_states``, or ``speed``) and measured channels:
-each support's load cell (``supports/<name>/measured_load``, WrenchStamped, stator frame:
-channels ``<name>/force_x`` ... ``<name>/torque_z``, header stamps) and any
-std_msgs/Float64 topic but ``speed`` (an accelerometer, a vibration meter: channel named by
-its topic, log times). The motion passes the node's input checks; the longest stretch at
+A run is a bag with the rotor's angle (the encoder's ``joint_states``, or ``speed``, or a
+once-per-revolution tach: ``names.keyphasor``, :mod:`cvc_balance.bag.channels`) and
+measured channels: each support's load cell (``supports/<name>/measured_load``,
+WrenchStamped, stator frame: channels ``<name>/force_x`` ... ``<name>/torque_z``, header
+stamps) and the vibration channels of :func:`cvc_balance.bag.channels.vibration_channels`
+(std_msgs/Float64 topics at their log times, Vector3Stamped and Imu axes at their header
+stamps; never the motion's own topics: the keyphasor, speed). The motion passes the node's
+input checks; the longest stretch at
 steady speed, cut to whole revolutions, gives each channel's 1x phasor
 (:mod:`cvc_balance.field.order_tracking`). Default channels: the cells' force x and y
-(and their tilting moment x and y with a single support) and every Float64 channel.
+(and their tilting moment x and y with a single support) and every vibration channel.
 
 :func:`calibrate_runs` makes influence coefficients from a baseline run and trial runs;
 :func:`correct_run` the corrections of a run, from coefficients or, without them, from
@@ -21,8 +24,10 @@ import math
 
 import numpy as np
 
+from cvc_balance.bag.channels import channel_samples, vibration_channels
 from cvc_balance.bag.identify_run import cell_readings
-from cvc_balance.bag.mcap_reader import BagError, float64_samples, wrench_samples
+from cvc_balance.bag.inputs import input_channels, InputTopics
+from cvc_balance.bag.mcap_reader import BagError, wrench_samples
 from cvc_balance.bag.replay import layout_events, read_inputs
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.field import (calibrate, continuous_correction, continuous_plan,
@@ -84,7 +89,9 @@ class RunReadings:
     times; ``layout`` in force there (None if the bag has none and none was given);
     ``first_ns`` the bag's first motion log time (its date); ``problems`` what the reader
     had to skip; ``segment`` the number of the layout segment read, ``segments`` every
-    :class:`Segment` of the run (a run is never read across a layout change).
+    :class:`Segment` of the run (a run is never read across a layout change);
+    ``names`` the input topics read (:class:`~cvc_balance.bag.inputs.InputTopics`) and
+    ``angle_from`` {kind: 'encoder' | 'speed' | 'keyphasor', topic}: where the angle came from.
     """
 
     bag: str
@@ -97,6 +104,8 @@ class RunReadings:
     problems: list = field(default_factory=list)
     segment: int = 1
     segments: tuple = ()
+    names: object = None
+    angle_from: dict = None
 
     @property
     def chosen(self):
@@ -104,8 +113,14 @@ class RunReadings:
         return self.segments[self.segment - 1]
 
 
-def channel_sources(bag):
-    """Return {channel name: (bag channel, component index or None, unit)} of a bag."""
+def channel_sources(bag, motion_topics=()):
+    """
+    Return {channel name: (bag channel, component index or ChannelSource, unit)} of a bag.
+
+    Load-cell components (index 0-5) and vibration channels (their
+    :class:`~cvc_balance.bag.channels.ChannelSource`); ``motion_topics``: the topics the
+    motion is read from (a keyphasor, a speed), never a vibration channel.
+    """
     sources = {}
     for channel in sorted(bag.channels.values(), key=lambda c: c.topic):
         parts = channel.topic.strip('/').split('/')
@@ -114,8 +129,8 @@ def channel_sources(bag):
             for k, component in enumerate(COMPONENTS):
                 unit = 'N' if component.startswith('force') else 'N m'
                 sources[f'{parts[-2]}/{component}'] = (channel, k, unit)
-        elif channel.msg_type == topics.FLOAT64_TYPE and parts[-1] != topics.SPEED:
-            sources['/'.join(parts)] = (channel, None, 'as recorded')
+    for source in vibration_channels(bag, exclude=motion_topics):
+        sources[source.name] = (source.channel, source, source.unit)
     return sources
 
 
@@ -124,7 +139,7 @@ def default_sensors(sources, layout):
     single = layout is not None and len(layout.supports) == 1
     wanted = ('force_x', 'force_y') + (('torque_x', 'torque_y') if single else ())
     return [name for name, (_, index, _) in sources.items()
-            if index is None or name.split('/')[-1] in wanted]
+            if not isinstance(index, int) or name.split('/')[-1] in wanted]
 
 
 @dataclass
@@ -138,16 +153,18 @@ class _Motion:
 
 
 def run_segments(bag, joint_name='gantry_joint', layout_file=None, speed=None,
-                 tolerance=DEFAULT_TOLERANCE, max_speed=1000.0, segment=None):
+                 tolerance=DEFAULT_TOLERANCE, max_speed=1000.0, segment=None, names=None):
     """
     Return (motion, [Segment], problems) of an open bag: its layout segments.
 
     The segments are the bag's own layout messages' (a ``layout_file`` replaces the
     layout of each, never joins them); each segment's steady stretches are at ``speed``
     rad/s, or at the speed the run spent most time at (the chosen ``segment``'s, when a
-    number is given). A bag without layouts is one segment with layout None.
+    number is given). A bag without layouts is one segment with layout None. ``names``:
+    the input topics (:class:`~cvc_balance.bag.inputs.InputTopics`: a keyphasor instead of
+    the encoder), as replay takes them.
     """
-    motion, layout_messages = read_inputs(bag, joint_name)
+    motion, layout_messages = read_inputs(bag, joint_name, names)
     stamp, log = motion.stamp * 1e-9, motion.log_time * 1e-9
     accepted = accepted_samples(stamp, motion.angle, motion.omega, max_speed, MAX_STAMP_JUMP,
                                 receive=log)
@@ -230,66 +247,105 @@ def choose_segment(path, segments, segment=None):
     return max(reversed(steady), key=lambda s: s.longest.revolutions)
 
 
+def angle_source(bag, names=None):
+    """
+    Return (where the angle comes from {kind, topic, type}, the motion's topics).
+
+    ``kind`` 'encoder' (JointState), 'speed' (Float64, integrated) or 'keyphasor' (a
+    once-per-revolution tach); the motion's topics are never vibration channels.
+    """
+    channels = input_channels(bag, names or InputTopics())
+    if channels.keyphasor is not None:
+        kind, channel = 'keyphasor', channels.keyphasor
+    elif channels.joint_states is not None:
+        kind, channel = 'encoder', channels.joint_states
+    else:
+        kind, channel = 'speed', channels.speed
+    motion = [c.topic for c in (channels.speed, channels.keyphasor) if c is not None]
+    return {'kind': kind, 'topic': channel.topic, 'type': channel.msg_type}, motion
+
+
+def angle_text(angle_from):
+    """Return where a run's angle came from, for people: 'the keyphasor /tach (...)'."""
+    if not angle_from:
+        return 'the encoder'
+    kind, topic = angle_from['kind'], angle_from['topic']
+    if kind == 'keyphasor':
+        return (f"the keyphasor {topic} ({angle_from['type']}: 0 at each mark, interpolated "
+                'between marks)')
+    return f"the {'encoder' if kind == 'encoder' else 'speed'} {topic}"
+
+
 def read_run(bag_path, sensors=None, speed=None, tolerance=DEFAULT_TOLERANCE,
-             joint_name='gantry_joint', layout_file=None, max_speed=1000.0, segment=None):
+             joint_name='gantry_joint', layout_file=None, max_speed=1000.0, segment=None,
+             names=None):
     """
     Return the :class:`RunReadings` of a bag (see the module's description).
 
     ``sensors``: channel names to read (default: :func:`default_sensors`); ``speed``
     rad/s: read the steady stretch at that speed (default: the speed the run spent most
     time at); ``segment``: the layout segment's number (default: the one with the longest
-    steady stretch). The stretch read lies inside one layout segment. Raises ValueError
-    (BagError) naming what is missing.
+    steady stretch); ``names``: the input topics (:class:`~cvc_balance.bag.inputs.
+    InputTopics`; its ``keyphasor``: the angle from a tach). The stretch read lies inside
+    one layout segment. Raises ValueError (BagError) naming what is missing.
     """
     bag = open_bag(bag_path)
+    angle_from, motion_topics = angle_source(bag, names)
     motion, segments, problems = run_segments(bag, joint_name, layout_file, speed, tolerance,
-                                              max_speed, segment)
+                                              max_speed, segment, names)
     chosen = choose_segment(bag.path, segments, segment)
     window, layout = chosen.longest, chosen.layout
     stamp, log, angle = motion.stamp, motion.log, motion.angle
-    sources = channel_sources(bag)
-    names = default_sensors(sources, layout) if sensors is None else list(sensors)
-    missing = [n for n in names if n not in sources]
-    if missing or not names:
+    sources = channel_sources(bag, motion_topics)
+    wanted = default_sensors(sources, layout) if sensors is None else list(sensors)
+    missing = [n for n in wanted if n not in sources]
+    if missing or not wanted:
         found = ', '.join(sources) or 'none'
+        said = [m for m in missing if m.strip('/') in (t.strip('/') for t in motion_topics)]
         raise BagError(f'{bag.path}: no channel {", ".join(missing) or "to read"} (channels: '
                        f'{found}; load cells are supports/<name>/measured_load, other '
-                       'channels std_msgs/Float64 topics)')
+                       'channels std_msgs/Float64, Vector3Stamped or Imu topics'
+                       + (f'; {", ".join(said)} is the motion, never a vibration channel'
+                          if said else '') + ')')
     log_window = type(window)(float(np.interp(window.start, stamp, log)),
                               float(np.interp(window.end, stamp, log)), window.speed,
                               window.revolutions, window.spread)
-    phasors, units, cache = {}, {}, {}
-    for name in names:
+    phasors, units, cache, vibrations = {}, {}, {}, {}
+    for name in wanted:
         channel, index, unit = sources[name]
-        if channel.id not in cache:
-            cache[channel.id] = wrench_samples(bag, channel) if index is not None \
-                else float64_samples(bag, channel)
-        if index is not None:
+        if isinstance(index, int):
+            if channel.id not in cache:
+                cache[channel.id] = wrench_samples(bag, channel)
             stamps, force, torque = cache[channel.id]
             values = np.concatenate([force, torque], axis=1)[:, index]
             times, motion_time, used = stamps * 1e-9, stamp, window
         else:
-            log_times, values = cache[channel.id]
-            times, motion_time, used = log_times * 1e-9, log, log_window
+            samples = channel_samples(bag, index, vibrations)
+            values = samples.values
+            times = samples.time * 1e-9
+            # Float64 carries no stamp: its log time, against the motion's log times.
+            motion_time, used = (log, log_window) if index.axis is None else (stamp, window)
         try:
             phasors[name] = track(times, values, motion_time, angle, used)
         except ValueError as error:
             raise BagError(f'{bag.path}: channel {name}: {error}') from None
         units[name] = unit
     return RunReadings(str(bag_path), window, log_window, phasors, units, layout,
-                       int(round(log[0] * 1e9)), problems, chosen.number, tuple(segments))
+                       int(round(log[0] * 1e9)), problems, chosen.number, tuple(segments),
+                       names, angle_from)
 
 
 def calibrate_runs(baseline_path, trial_paths, trials, keep_trial=False, sensors=None,
                    speed=None, tolerance=DEFAULT_TOLERANCE, joint_name='gantry_joint',
-                   layout_file=None, segments=None):
+                   layout_file=None, segments=None, names=None):
     """
     Return (Calibration, [RunReadings], warnings) of a baseline run and trial runs.
 
     ``trials``: one :class:`~cvc_balance.field.influence.Trial` (kg, rad, m) per trial
     run, in order. Every run is read at the baseline's steady speed (or ``speed``), each
     inside one layout segment: ``segments`` one number per run, or one for every run
-    (None: each run's longest steady one).
+    (None: each run's longest steady one); ``names`` the input topics of every run
+    (:class:`~cvc_balance.bag.inputs.InputTopics`: a keyphasor instead of the encoder).
     """
     if len(trial_paths) != len(trials):
         raise ValueError(f'{len(trial_paths)} trial runs but {len(trials)} --trial weights: '
@@ -302,16 +358,17 @@ def calibrate_runs(baseline_path, trial_paths, trials, keep_trial=False, sensors
         raise ValueError(f'--segment: give one number for every run or one per run ({count}), '
                          f'got {len(segments)}')
     baseline = read_run(baseline_path, sensors, speed, tolerance, joint_name, layout_file,
-                        segment=segments[0])
+                        segment=segments[0], names=names)
     if baseline.layout is not None and baseline.layout.correction_planes() is not None:
         try:
             plane_positions(baseline.layout, dict.fromkeys(t.plane for t in trials))
         except ValueError as error:
             raise ValueError(f'--trial: {error}') from None
-    names = list(baseline.phasors)
+    sensors = list(baseline.phasors)
     at = baseline.window.speed if speed is None else speed
-    runs = [baseline] + [read_run(p, names, at, tolerance, joint_name, layout_file,
-                                  segment=n) for p, n in zip(trial_paths, segments[1:])]
+    runs = [baseline] + [read_run(p, list(baseline.phasors), at, tolerance, joint_name,
+                                  layout_file, segment=n, names=names)
+                         for p, n in zip(trial_paths, segments[1:])]
     warnings = []
     for k, run in enumerate(runs[1:]):
         off = abs(run.window.speed / baseline.window.speed - 1.0)
@@ -326,10 +383,10 @@ def calibrate_runs(baseline_path, trial_paths, trials, keep_trial=False, sensors
                             f"'{baseline.layout.name}' ({baseline.layout.digest()}): the "
                             'coefficients take the baseline\'s')
     calibration = calibrate(
-        [baseline.phasors[n].value for n in names], trials,
-        [[run.phasors[n].value for n in names] for run in runs[1:]], names, keep_trial,
-        [baseline.phasors[n].sigma for n in names],
-        [[run.phasors[n].sigma for n in names] for run in runs[1:]])
+        [baseline.phasors[n].value for n in sensors], trials,
+        [[run.phasors[n].value for n in sensors] for run in runs[1:]], sensors, keep_trial,
+        [baseline.phasors[n].sigma for n in sensors],
+        [[run.phasors[n].sigma for n in sensors] for run in runs[1:]])
     return calibration, runs, warnings
 
 
@@ -365,7 +422,7 @@ def layout_sensors(layout):
 
 def trial_advice(run_path=None, layout_file=None, standard_errors=20.0, sigma=None,
                  speed=None, segment=None, tolerance=DEFAULT_TOLERANCE,
-                 joint_name='gantry_joint'):
+                 joint_name='gantry_joint', names=None):
     """
     Return (advice per plane, RunReadings or None, layout, speed): trial weights to use.
 
@@ -377,7 +434,7 @@ def trial_advice(run_path=None, layout_file=None, standard_errors=20.0, sigma=No
     run = None
     if run_path is not None:
         run = read_run(run_path, None, speed, tolerance, joint_name, layout_file,
-                       segment=segment)
+                       segment=segment, names=names)
         layout, speed = run.layout, run.window.speed
         if layout is None:
             raise BagError(f'{run_path}: no layout in the run: give --layout-file')
@@ -461,7 +518,8 @@ class FieldCorrection:
     ``warnings`` one line each; ``objective`` and ``max_weights`` of the optimal plan;
     ``model_check`` the coefficients against the layout's physics (None without
     coefficients); ``segment_grades`` a GradeView or None per segment of the run;
-    ``existing`` the PlacedWeights on already (a trim).
+    ``existing`` the PlacedWeights on already (a trim); ``verdict`` the verdict of record
+    from vibration readings through coefficients (None otherwise).
     """
 
     run: RunReadings
@@ -477,6 +535,7 @@ class FieldCorrection:
     model_check: object = None
     segment_grades: tuple = ()
     existing: tuple = ()
+    verdict: object = None
 
 
 def _check_correction_masses(layout, planes, correction, radius, sites):
@@ -493,17 +552,18 @@ def _check_correction_masses(layout, planes, correction, radius, sites):
 
 
 def identify_segment(bag_path, segment, joint_name='gantry_joint', max_speed=1000.0,
-                     time_constant=0.1):
+                     time_constant=0.1, names=None):
     """
     Return the RotorUnbalance the load cells identify over one :class:`Segment`, or None.
 
     The segment's own layout and samples only (never across a layout change), the motion
-    and alpha as ``identify`` takes them; None without cells or when not identifiable.
+    and alpha as ``identify`` takes them (``names``: its input topics); None without
+    cells or when not identifiable.
     """
     if segment.layout is None:
         return None
     bag = open_bag(bag_path)
-    motion, _ = read_inputs(bag, joint_name)
+    motion, _ = read_inputs(bag, joint_name, names)
     t = motion.stamp * 1e-9
     accepted, alpha = accepted_motion(t, motion.log_time * 1e-9, motion.angle, motion.omega,
                                       max_speed, time_constant)
@@ -540,7 +600,7 @@ def grade_view(run, joint_name='gantry_joint', segment=None):
     layout = segment.layout
     if layout is None or layout.correction_planes() is None:
         return None
-    identified = identify_segment(run.bag, segment, joint_name)
+    identified = identify_segment(run.bag, segment, joint_name, names=run.names)
     if identified is None or not identified.planes:
         return None
     model = RotorModel.from_layout(layout)
@@ -558,7 +618,8 @@ def grade_view(run, joint_name='gantry_joint', segment=None):
 def correct_run(run_path, calibration=None, record=None, layout_file=None,
                 objective=None, limit=None, max_weights=None, tolerance=DEFAULT_TOLERANCE,
                 joint_name='gantry_joint', time_limit=30.0, segment=None,
-                accept_mismatch=False, speed=None, weights_on=()):
+                accept_mismatch=False, speed=None, weights_on=(), names=None,
+                identity=None):
     """
     Return the :class:`FieldCorrection` of a run (see the module's description).
 
@@ -574,12 +635,16 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
     coefficients.at_speed`). Coefficients that disagree with the layout's physics raise
     ValueError naming the likely mistake, unless ``accept_mismatch``. ``weights_on``: the
     weights bolted on already (:func:`weights_on_sites`): the plans may take them off.
+    ``names``: the run's input topics (a keyphasor instead of the encoder); ``identity``
+    the coefficients' record named (:func:`coefficients_identity`): without load cells,
+    the verdict of record is then measured by the vibration sensors through them
+    (``FieldCorrection.verdict``), unless they were made on another layout.
     """
     warnings = []
     speed = speed or (None if record is None else record.get('speed'))
     sensors = None if calibration is None else list(calibration.sensors)
     run = read_run(run_path, sensors, speed, tolerance, joint_name, layout_file,
-                   segment=segment)
+                   segment=segment, names=names)
     layout = run.layout
     grades = tuple(grade_view(run, joint_name=joint_name, segment=s) for s in run.segments)
     grade = grades[run.segment - 1]
@@ -617,10 +682,61 @@ def correct_run(run_path, calibration=None, record=None, layout_file=None,
         # The grade limits the plan too: the identified unbalance plus the weights.
         problem = with_unbalance_limits(problem, grade.planes, grade.before,
                                         grade.permissible - np.asarray(grade.ci95))
+    verdict = None
+    if grade is None and identity is not None:
+        grade, verdict = _coefficient_verdict(run, calibration, record, identity, problem,
+                                              layout, warnings)
     elif grade is None:
         grade = coefficient_grade(problem, layout, run.window.speed)
-    return _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
-                        objective, max_weights, time_limit, check, grades, weights_on)
+    result = _corrections(run, 'influence coefficients', problem, layout, grade, warnings,
+                          objective, max_weights, time_limit, check, grades, weights_on)
+    result.verdict = verdict
+    return result
+
+
+def _coefficient_verdict(run, calibration, record, identity, problem, layout, warnings):
+    """
+    Return (GradeView or None, VerdictOfRecord or None) of a run read through coefficients.
+
+    The verdict of record measured by the vibration sensors through the coefficients
+    (:func:`~cvc_balance.identify.evidence.verdict_of_record` of a PlaneEstimate); when
+    they were made on another layout (digest) the layout's verdict stands, saying why,
+    and no measured grade is shown.
+    """
+    from cvc_balance.field.coefficients import plane_unbalance
+    from cvc_balance.identify.evidence import PlaneEstimate, verdict_of_record
+    if layout is None or layout.correction_planes() is None or problem.unit != 'kg m' \
+            or set(problem.planes) != {'I', 'II'}:
+        return coefficient_grade(problem, layout, run.window.speed), None
+    model = RotorModel.from_layout(layout)
+    made_on = record.get('layout') if isinstance(record.get('layout'), dict) else None
+    if made_on and made_on.get('digest') != layout.digest():
+        reason = (f"coefficients {identity['file']}: made on layout '{made_on.get('name')}' "
+                  f"({made_on.get('digest')}), this run's is '{layout.name}' "
+                  f'({layout.digest()}): not this machine type')
+        warnings.append(reason)
+        return None, verdict_of_record(model, None, run.window.speed,
+                                       no_measurement=reason, coefficients=identity)
+    by = f"the vibration sensors through coefficients {identity['file']}"
+    grade = coefficient_grade(problem, layout, run.window.speed, by)
+    sensors = list(calibration.sensors)
+    u, covariance = plane_unbalance(calibration, [run.phasors[n].value for n in sensors],
+                                    [run.phasors[n].sigma for n in sensors])
+    order = [calibration.planes.index(p) for p in ('I', 'II')]
+    estimate = PlaneEstimate(
+        tuple(layout.correction_planes()), tuple(complex(u[k]) for k in order),
+        tuple(tuple(complex(covariance[i, j]) for j in order) for i in order), by, identity,
+        min(p.samples for p in run.phasors.values()))
+    verdict = verdict_of_record(model, estimate, run.window.speed)
+    if grade is not None:
+        grade.ci95 = tuple(estimate.ci95(w) for w in plane_weights(estimate.z))
+    return grade, verdict
+
+
+def plane_weights(z):
+    """Return the (w_S, w_P) that pick u_I and u_II out of S and P about O (planes at z)."""
+    span = z[1] - z[0]
+    return ((z[1] / span, -1.0 / span), (-z[0] / span, 1.0 / span))
 
 
 @dataclass
@@ -699,7 +815,7 @@ def _checked(calibration, record, layout, speed, accept_mismatch, warnings):
     return calibration, check
 
 
-def coefficient_grade(problem, layout, speed):
+def coefficient_grade(problem, layout, speed, source='the readings through the coefficients'):
     """
     Return the :class:`GradeView` of the unbalance readings imply through coefficients.
 
@@ -721,7 +837,7 @@ def coefficient_grade(problem, layout, speed):
     u_per = iso21940.permissible_unbalance(layout.balancing.grade, model.mass, service)
     return GradeView(('I', 'II'), tuple(z), before[order], (0.0, 0.0),
                      np.array([u_per * s for s in shares]), layout.balancing.grade, service,
-                     model.mass, shares, 'the readings through the coefficients')
+                     model.mass, shares, source)
 
 
 def weights_on_sites(layout, specs):
@@ -803,3 +919,106 @@ def _corrections(run, method, problem, layout, grade, warnings, objective, max_w
                                   time_limit=time_limit, existing=existing))
     return FieldCorrection(run, method, problem, plans, used_sites, radius, grade, warnings,
                            objective, max_weights, check, grades, existing)
+
+
+@dataclass(frozen=True)
+class CoefficientReading:
+    """
+    One layout segment's unbalance from vibration readings through stored coefficients.
+
+    ``segment`` the :class:`Segment`; ``estimate`` the
+    :class:`~cvc_balance.identify.evidence.PlaneEstimate` (None when the coefficients do
+    not fit this segment: ``reason`` one line why); ``run`` the :class:`RunReadings` read
+    (None when nothing was read); ``identity`` the coefficients' record named.
+    """
+
+    segment: Segment
+    estimate: object
+    reason: str
+    run: object
+    identity: dict
+
+
+def coefficients_identity(path, record):
+    """
+    Return the coefficients' record named, as plain data, for the verdict's JSON and text.
+
+    ``file`` (as given), ``sha256`` (the file's bytes, 16 hex digits), ``made`` (the
+    baseline run's date, or None by hand), ``layout`` {name, digest} the record was made
+    on (or None), ``speed`` rad/s (or None), ``sensors`` and ``reading_units``.
+    """
+    import hashlib
+    from pathlib import Path
+    runs = [r for r in record.get('runs') or () if isinstance(r, dict)]
+    return {'file': str(path),
+            'sha256': hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
+            'made': next((r.get('date') for r in runs if r.get('date')), None),
+            'layout': record.get('layout'), 'speed': record.get('speed'),
+            'sensors': list(record.get('sensors') or ()),
+            'reading_units': list(record.get('reading_units') or ())}
+
+
+def coefficient_readings(bag_path, calibration, record, identity, names=None,
+                         layout_file=None, tolerance=DEFAULT_TOLERANCE,
+                         joint_name='gantry_joint'):
+    """
+    Return a :class:`CoefficientReading` per layout segment of a bag: readings = C u solved.
+
+    The coefficients' sensors are read over each segment's longest steady stretch at the
+    record's speed (:func:`read_run`); they fit the segment when they are kg m per
+    planes I and II, made on the segment's layout (same digest, when the record names
+    one), at its speed (:func:`~cvc_balance.field.coefficients.at_speed`: within 0.1 %,
+    or scaled for load cells) and every sensor is in the bag. Else ``reason`` says which,
+    in one line, and the verdict stays the layout's.
+    """
+    from cvc_balance.field.coefficients import plane_unbalance
+    from cvc_balance.identify.evidence import PlaneEstimate
+    bag = open_bag(bag_path)
+    speed = record.get('speed')
+    _, segments, _ = run_segments(bag, joint_name, layout_file, speed, tolerance,
+                                  names=names)
+    file = identity['file']
+    made_on = record.get('layout') if isinstance(record.get('layout'), dict) else None
+    out = []
+    for segment in segments:
+        def unfit(reason, run=None, segment=segment):
+            return CoefficientReading(segment, None, f'coefficients {file}: {reason}', run,
+                                      identity)
+        layout = segment.layout
+        if record.get('correction_unit') != 'kg m' or set(calibration.planes) != {'I', 'II'}:
+            out.append(unfit(f"per {record.get('correction_unit')} in planes "
+                             f"{', '.join(calibration.planes)}, not kg m in planes I and II: "
+                             'no unbalance in g mm'))
+            continue
+        if layout is None or layout.correction_planes() is None:
+            out.append(unfit('the segment has no layout with two correction planes to '
+                             'judge the unbalance in'))
+            continue
+        if made_on and made_on.get('digest') != layout.digest():
+            out.append(unfit(f"made on layout '{made_on.get('name')}' ({made_on.get('digest')}"
+                             f"), this segment's is '{layout.name}' ({layout.digest()}): "
+                             'not this machine type'))
+            continue
+        if segment.longest is None:
+            at = f'the coefficients\' {speed:.4g} rad/s' if speed else 'a steady speed'
+            out.append(unfit(f'no steady stretch at {at} (+-{tolerance:.1%}) in this '
+                             f'segment: {segment.note}'))
+            continue
+        try:
+            run = read_run(bag_path, list(calibration.sensors), speed, tolerance, joint_name,
+                           layout_file, segment=segment.number, names=names)
+            scaled, _ = at_speed(calibration, record, run.window.speed)
+        except ValueError as error:
+            out.append(unfit(str(error).replace(f'{bag.path}: ', '')))
+            continue
+        readings = [run.phasors[n].value for n in calibration.sensors]
+        sigma = [run.phasors[n].sigma for n in calibration.sensors]
+        u, covariance = plane_unbalance(scaled, readings, sigma)
+        order = [calibration.planes.index(p) for p in ('I', 'II')]
+        estimate = PlaneEstimate(
+            tuple(layout.correction_planes()), tuple(complex(u[k]) for k in order),
+            tuple(tuple(complex(covariance[i, j]) for j in order) for i in order),
+            f'the vibration sensors through coefficients {file}', identity,
+            min(p.samples for p in run.phasors.values()))
+        out.append(CoefficientReading(segment, estimate, None, run, identity))
+    return out

@@ -67,16 +67,21 @@ def utc(ns):
         microsecond=(ns % 1_000_000_000) // 1000).isoformat().replace('+00:00', 'Z')
 
 
-def replay_record(summary, identified=None, machine_id=None):
+def replay_record(summary, identified=None, machine_id=None, coefficients=None):
     """
     Return a :class:`~cvc_balance.bag.replay.ReplaySummary` as JSON-able data.
 
     ``identified``: [IdentifiedSegment] of the same bag (matched to the replay's
-    segments by layout digest and start), or None; ``machine_id``: the bag's own.
+    segments by layout digest and start), or None; ``machine_id``: the bag's own;
+    ``coefficients``: [CoefficientReading] of the same bag
+    (:func:`cvc_balance.bag.field_run.coefficient_readings`: vibration readings through
+    stored coefficients), matched by layout digest and time, or None.
     """
     by_start = {(s.layout.digest(), s.start_ns): s for s in identified or ()}
     matched = [by_start.get((s.layout.digest(), max(s.start_ns, 0))) for s in summary.segments]
-    segments = [segment_record(s, found) for s, found in zip(summary.segments, matched)]
+    read = [_coefficient_match(s, coefficients) for s in summary.segments]
+    segments = [segment_record(s, found, c) for s, found, c
+                in zip(summary.segments, matched, read)]
     checks = list(summary.input_checks) + [
         InputCheck('load cells', number, finding)
         for number, found in enumerate(matched, start=1) if found is not None
@@ -102,6 +107,19 @@ def replay_record(summary, identified=None, machine_id=None):
     }
 
 
+def _coefficient_match(segment, readings):
+    """Return the CoefficientReading of a replay segment (same layout, its samples), or None."""
+    if not readings or segment.first_ns is None:
+        return None
+    digest = segment.layout.digest()
+    for reading in readings:
+        layout = reading.segment.layout
+        if layout is not None and layout.digest() == digest \
+                and segment.first_ns <= reading.segment.first_ns <= segment.last_ns:
+            return reading
+    return None
+
+
 def cell_findings(identified):
     """
     Return the mistakes an identified segment's cells show: [Finding] (none if not fitted).
@@ -116,18 +134,25 @@ def cell_findings(identified):
     return cell_mistakes(static_loads(identified.model), measured)
 
 
-def segment_record(segment, identified=None):
+def segment_record(segment, identified=None, coefficients=None):
     """
     Return one layout segment of a replay as JSON-able data (see :func:`replay_record`).
 
     ``verdict`` is the verdict of record (:mod:`cvc_balance.identify.evidence`): the
-    measured rotor's when the segment's load cells can tell, else the layout's, labelled;
-    ``balance`` the layout's assessment in detail (what the layout expects).
+    measured rotor's when the segment's load cells can tell, or without cells its
+    vibration readings through stored coefficients (``coefficients``, a
+    CoefficientReading: also in the record's ``coefficients``), else the layout's,
+    labelled; ``balance`` the layout's assessment in detail (what the layout expects).
     """
     layout = segment.layout
     model = segment.model or RotorModel.from_layout(layout)     # aggregated once
-    of_record = verdict_of_record(model, None if identified is None else identified.estimate,
-                                  top_speed=segment.max_speed)
+    estimate, unfit = None if identified is None else identified.estimate, {}
+    if estimate is None and coefficients is not None:
+        estimate = coefficients.estimate
+        if estimate is None:
+            unfit = {'no_measurement': coefficients.reason,
+                     'coefficients': coefficients.identity}
+    of_record = verdict_of_record(model, estimate, top_speed=segment.max_speed, **unfit)
     verdict = of_record.layout
     balance = verdict_record(verdict)
     if balance is not None:          # replay's record also says where the static unbalance is
@@ -153,10 +178,52 @@ def segment_record(segment, identified=None):
             'force_N': choice.deviation.force, 'moment_Nm': choice.deviation.moment,
             'torque_Nm': choice.deviation.torque},
         'identified': None,
+        'coefficients': coefficient_record(coefficients, of_record)
+        if identified is None else None,
         'life': support_records(segment, identified, of_record),
     }
     if identified is not None:
         record['identified'] = identified_record(identified, of_record)
+    return record
+
+
+def coefficient_record(reading, of_record):
+    """
+    Return what a segment's vibration readings gave through coefficients, or None.
+
+    The coefficients' record named (file, sha256, made, layout, speed); the stretch read
+    (log times s, speed rad/s, revolutions, where the angle came from); each sensor's 1x
+    reading; each plane's unbalance (g mm, degrees, 95 % radius) and its fraction of the
+    permissible share (from the verdict of record's measured rotor); or ``reason`` why the
+    coefficients do not fit (then no readings or planes).
+    """
+    if reading is None:
+        return None
+    record = {**reading.identity, 'reason': reading.reason, 'window': None, 'speed': None,
+              'revolutions': None, 'angle_from': None, 'readings': [], 'planes': []}
+    run = reading.run
+    if run is not None:
+        record.update(window=[run.log_window.start, run.log_window.end],
+                      speed=run.window.speed, revolutions=run.window.revolutions,
+                      angle_from=run.angle_from,
+                      readings=[{'channel': n, 'unit': run.units[n],
+                                 'amplitude': abs(p.value),
+                                 'phase_deg': degrees_360(math.atan2(p.value.imag,
+                                                                     p.value.real)),
+                                 'sigma': p.sigma} for n, p in run.phasors.items()])
+    estimate, measured = reading.estimate, of_record.measured
+    if estimate is None:
+        return record
+    judged = None if measured is None else measured.assessment
+    fractions = list(judged.fractions) if judged is not None and judged.planes \
+        else [None, None]
+    from cvc_balance.bag.field_run import plane_weights
+    for label, z, u, weights, fraction in zip(('I', 'II'), estimate.z, estimate.values,
+                                              plane_weights(estimate.z), fractions):
+        record['planes'].append({'plane': label, 'z': z, 'g_mm': g_mm(abs(u)),
+                                 'angle_deg': degrees_360(math.atan2(u.imag, u.real)),
+                                 'ci95_g_mm': g_mm(estimate.ci95(weights)),
+                                 'fraction': fraction})
     return record
 
 
@@ -254,6 +321,33 @@ def check_where(check):
     return f"{check['input']} ({seen} of {judged} windows of {MOTION_WINDOW} samples)"
 
 
+def coefficient_lines(record):
+    """Return the text lines of a segment's readings through coefficients (none: [])."""
+    if record is None:
+        return []
+    layout = record['layout']
+    made = ', '.join(part for part in (
+        f"made {record['made']}" if record['made'] else '',
+        f"at {record['speed']:.4g} rad/s" if record['speed'] else '',
+        f"on layout '{layout['name']}' ({layout['digest']})" if layout else '') if part)
+    lines = [f"  coefficients {record['file']} (sha256 {record['sha256']}"
+             + (f'; {made}' if made else '') + ')']
+    if record['reason'] is not None:
+        return lines
+    from cvc_balance.bag.field_run import angle_text
+    lines.append(f"  read {record['window'][0]:.3f}-{record['window'][1]:.3f} s at "
+                 f"{record['speed']:.4g} rad/s, {record['revolutions']} revolutions, angle "
+                 f"from {angle_text(record['angle_from'])}: " + ', '.join(
+                     f"{r['channel']} {r['amplitude']:.4g} {r['unit']} at "
+                     f"{r['phase_deg']:.1f} deg" for r in record['readings']))
+    for p in record['planes']:
+        share = '' if p['fraction'] is None else f" = {p['fraction']:.2f} of its permissible"
+        lines.append(f"  measured plane {p['plane']:2} (z {p['z']:.3f} m): {p['g_mm']:.1f} g mm "
+                     f"at {p['angle_deg']:.1f} deg +- {p['ci95_g_mm']:.1f} g mm (95 %){share}, "
+                     'through the coefficients')
+    return lines
+
+
 def _segment_lines(segment):
     layout, verdict = segment['layout'], segment['verdict']
     start = segment['from'] if segment['from'] is not None else 0.0
@@ -264,6 +358,7 @@ def _segment_lines(segment):
         lines.append(f"  {verdict['layout_expects']}")
     if verdict['disagreement']:
         lines.append(f"  {verdict['disagreement']}")
+    lines += coefficient_lines(segment.get('coefficients'))
     identified = segment['identified']
     if identified is not None and identified['identifiable']:
         fractions = (identified['grade'] or {}).get('fractions') or [None, None]

@@ -57,6 +57,14 @@ def register(commands):
                         help='print the summary as one JSON object (its fields: the docs\' '
                         '"JSON outputs"); with load cells in the bag, each segment\'s '
                         'identified unbalance too')
+    replay.add_argument('--coefficients', type=input_file, metavar='FILE',
+                        help='influence coefficients of this machine type (from calibrate or '
+                        'influence -o, kg m per plane I and II): without load cells, the '
+                        "vibration channels' 1x readings give each plane's unbalance through "
+                        'them (readings = C u), hence the verdict "measured by the vibration '
+                        'sensors through coefficients FILE"; coefficients made on another '
+                        'layout (digest) or at another speed are not used, and the line says '
+                        "why the layout's verdict stands")
     replay.add_argument('--tolerance', type=tolerance, nargs=3, metavar=('N', 'NM', 'TNM'),
                         help='largest change accepted in the forces (N), moments (N m) and '
                         'drive torque (N m), inf for an output not asked: each layout takes '
@@ -156,8 +164,8 @@ def _replay(args):
     from cvc_balance.bag.replay import replay
     from cvc_balance.bag.run_summary import format_replay, replay_record
     show = args.progress if args.progress is not None else sys.stderr.isatty()
-    with staged_outputs([args.bag, args.layout_file], bags=('bag',), bag=args.output,
-                        rrd=args.rrd) as out:
+    with staged_outputs([args.bag, args.layout_file, args.coefficients], bags=('bag',),
+                        bag=args.output, rrd=args.rrd) as out:
         # The verdict of record needs the cells' fit first: the text, the JSON and the
         # view all lead with it.
         identified = _identified(args)
@@ -173,12 +181,26 @@ def _replay(args):
             _log_cells(logger, identified)
             logger.finish()
     summary.output = args.output or ''
-    record = replay_record(summary, identified, bag_custom_data(args.bag).get(MACHINE_ID))
+    record = replay_record(summary, identified, bag_custom_data(args.bag).get(MACHINE_ID),
+                           _coefficient_readings(args))
     if args.json:
         print_json(record)
     else:
         print(format_replay(record))
     return 0
+
+
+def _coefficient_readings(args):
+    """Return the bag's readings through ``--coefficients`` ([CoefficientReading]), or None."""
+    if not args.coefficients:
+        return None
+    from cvc_balance.bag.field_run import coefficient_readings, coefficients_identity
+    from cvc_balance.cli.field import read_coefficients
+    calibration, record = read_coefficients(args.coefficients)
+    return coefficient_readings(args.bag, calibration, record,
+                                coefficients_identity(args.coefficients, record),
+                                input_topics(args), args.layout_file,
+                                joint_name=args.joint_name)
 
 
 def _identified(args):

@@ -14,8 +14,8 @@ import math
 from pathlib import Path
 import sys
 
-from cvc_balance.cli.arguments import (count, input_bag, input_file, positive, print_json,
-                                       renamed, within)
+from cvc_balance.cli.arguments import (add_keyphasor, count, input_bag, input_file,
+                                       positive, print_json, renamed, within)
 from cvc_balance.files import check_output, moved_into_when_done, replaced_when_done
 from cvc_balance.physics import limits
 from cvc_balance.physics.frames import degrees
@@ -30,8 +30,9 @@ def register(commands):
     """Add calibrate, influence, correct and report."""
     calibrate = commands.add_parser(
         'calibrate', help='influence coefficients from a baseline run and trial-weight runs',
-        description='Read the 1x amplitude and phase of every sensor (load cells, Float64 '
-        'channels) over whole revolutions at steady speed in a baseline run and one run per '
+        description='Read the 1x amplitude and phase of every sensor (load cells, vibration '
+        'channels: Float64 topics, Vector3Stamped and Imu axes) against the encoder or a '
+        'keyphasor over whole revolutions at steady speed in a baseline run and one run per '
         'trial weight, and save the influence coefficients (least squares over the runs).')
     calibrate.add_argument('runs', nargs='+', type=input_bag, metavar='RUN',
                            help='BASELINE then one bag per trial run')
@@ -56,7 +57,8 @@ def register(commands):
                            "baseline's)")
     calibrate.add_argument('--sensor', action='append', metavar='NAME',
                            help='channel to use (repeat; default: cell forces x, y and every '
-                           'Float64 topic)')
+                           'vibration channel: Float64 topics, Vector3Stamped and Imu axes as '
+                           'TOPIC/x ...)')
     calibrate.add_argument('-o', '--output', metavar='FILE', help='save the coefficients '
                            '(YAML)')
     calibrate.add_argument('--json', action='store_true', help='print the record as JSON')
@@ -199,6 +201,18 @@ def _run_options(command):
                          help='speeds within this of the steady speed count as steady '
                          '(default 1 %%)')
     command.add_argument('--joint-name', default='gantry_joint', help='JointState joint')
+    add_keyphasor(command, 'a once-per-revolution tach instead of an encoder, in every run '
+                  'read: the rotor angle is 0 at each of its marks and interpolated between '
+                  'them (the phases are then against the mark); never read as a vibration '
+                  'channel (default: keyphasor, when a run has neither joint_states nor '
+                  'speed)')
+
+
+def run_inputs(args):
+    """Return the runs' input topics the options name (the keyphasor, as replay takes it)."""
+    from cvc_balance.bag.inputs import InputTopics
+    return InputTopics(keyphasor=args.keyphasor, keyphasor_edge=args.keyphasor_edge,
+                       keyphasor_threshold=args.keyphasor_threshold)
 
 
 def warn(lines):
@@ -224,7 +238,8 @@ def run_calibrate(args):
         check_output(args.output, args.runs)
     calibration, runs, speed_warnings = calibrate_runs(
         args.runs[0], args.runs[1:], trials, args.keep_trial, args.sensor, args.speed,
-        args.speed_tolerance / 100.0, args.joint_name, args.layout_file, args.segment)
+        args.speed_tolerance / 100.0, args.joint_name, args.layout_file, args.segment,
+        run_inputs(args))
     check = check_calibration(calibration, runs, trials, args.keep_trial)
     if check.mismatch and not args.accept_mismatch:
         raise ValueError(check.refusal)
@@ -270,6 +285,7 @@ def check_mapping(check):
 def run_identity(run, role):
     """Return a run's identity and steady window as plain data."""
     return {'role': role, 'bag': run.bag, 'date': bag_date(run.first_ns),
+            'angle_from': run.angle_from,
             'segment': segment_mapping(run.chosen), 'segments': len(run.segments),
             'speed': run.window.speed, 'revolutions': run.window.revolutions,
             'window': [run.window.start, run.window.end], 'speed_spread': run.window.spread,
@@ -317,7 +333,9 @@ def format_record(record):
     lines = []
     for run in record['runs']:
         lines.append(f"{run['role']}: {run['bag']} at {run['speed']:.4g} rad/s, "
-                     f"{run['revolutions']} revolutions")
+                     f"{run['revolutions']} revolutions"
+                     + (f"; angle from {angle_text(run['angle_from'])}"
+                        if run.get('angle_from') else ''))
         if run.get('segment'):
             lines.append(f"  read in {segment_line(run['segment'])}"
                          + (f" (of {run['segments']}; --segment to choose)"
@@ -358,6 +376,12 @@ def check_line(check):
     return f"MISMATCH with the layout's physics (accepted): measured/predicted {said}"
 
 
+def angle_text(angle_from):
+    """Return where a run's angle came from, for people (:func:`field_run.angle_text`)."""
+    from cvc_balance.bag.field_run import angle_text as text
+    return text(angle_from)
+
+
 def _number(value):
     return 'inf' if value is None else f'{value:.3g}'
 
@@ -379,7 +403,7 @@ def run_trial_weight(args):
         raise ValueError("--sigma is for the layout alone: a baseline gives its own")
     advice, run, layout, speed = trial_advice(
         args.bag, args.layout_file, args.standard_errors, args.sigma, args.speed, args.segment,
-        args.speed_tolerance / 100.0, args.joint_name)
+        args.speed_tolerance / 100.0, args.joint_name, run_inputs(args))
     summary = plain({
         'run': None if run is None else run_identity(run, 'baseline'),
         'layout': _layout(layout), 'speed': speed, 'standard_errors': args.standard_errors,
@@ -397,8 +421,9 @@ def run_trial_weight(args):
     if args.json:
         print_json(summary)
         return 0
-    source = (f"baseline {run.bag}, {segment_line(segment_mapping(run.chosen))}"
-              if run is not None else f"layout '{layout.name}' alone")
+    source = (f"baseline {run.bag}, {segment_line(segment_mapping(run.chosen))}; angle from "
+              f"{angle_text(run.angle_from)}" if run is not None
+              else f"layout '{layout.name}' alone")
     lines = [f'trial weights at {speed:.4g} rad/s ({source}):']
     for a in summary['planes']:
         seen = '' if a['standard_errors'] is None else \
@@ -583,10 +608,13 @@ def correction_summary(args):
         return summarise(result, record), result
     if args.bag is None:
         raise ValueError('give the run to correct (RUN), or --readings with --coefficients')
+    from cvc_balance.bag.field_run import coefficients_identity
     result = correct_run(args.bag, calibration, record, args.layout, args.objective,
                          args.limit, args.max_weights, args.speed_tolerance / 100.0,
                          args.joint_name, args.time_limit, args.segment, args.accept_mismatch,
-                         args.speed, weights_on)
+                         args.speed, weights_on, run_inputs(args),
+                         coefficients_identity(args.coefficients, record)
+                         if args.coefficients else None)
     return summarise(result, record), result
 
 
@@ -631,7 +659,7 @@ def measured_after(path, args, result):
         raise ValueError('--after needs load cells and a layout with two correction planes '
                          'in the run (to compare the identified unbalance)')
     run = read_run(path, None, None, args.speed_tolerance / 100.0, args.joint_name,
-                   args.layout)
+                   args.layout, names=run_inputs(args))
     view = grade_view(run, args.joint_name)
     if view is None:
         raise ValueError(f'{path}: no load cells to identify the unbalance after the '
@@ -670,10 +698,11 @@ def _plane_vector(plane, z, value, ci95=None, permissible=None):
 def _run_mapping(run):
     """Return what was corrected: a run's identity and window, or readings by hand."""
     if getattr(run, 'window', None) is None:
-        return {'bag': None, 'source': 'readings by hand', 'date': None,
+        return {'bag': None, 'source': 'readings by hand', 'date': None, 'angle_from': None,
                 'layout': _layout(run.layout), 'speed': run.speed, 'revolutions': None,
                 'window': None, 'speed_spread': None, 'segment': None}
     return {'bag': run.bag, 'source': 'run', 'date': bag_date(run.first_ns),
+            'angle_from': run.angle_from,
             'layout': _layout(run.layout), 'speed': run.window.speed,
             'revolutions': run.window.revolutions, 'window': [run.window.start, run.window.end],
             'speed_spread': run.window.spread, 'segment': run.segment}
@@ -746,6 +775,8 @@ def summarise(result, record=None):
         'readings': _readings(run),
         'weights_on': [_placed(w, result.sites) for w in result.existing],
         'coefficients': None, 'grade': None, 'plans': [], 'warnings': list(result.warnings),
+        'verdict': None if getattr(result, 'verdict', None) is None
+        else result.verdict.record(),
     }
     if result.method == 'influence coefficients':
         # The sensors' coefficients only: the grade's limits ride along as channels of
@@ -887,7 +918,8 @@ def format_summary(summary):
     else:
         lines = [f"run {run['bag']} ({run['date']}), layout "
                  + (f"'{layout['name']}' ({layout['digest']})" if layout else 'none')
-                 + f": {run['revolutions']} revolutions {speed}"]
+                 + f": {run['revolutions']} revolutions {speed}, angle from "
+                 + angle_text(run.get('angle_from'))]
     segments = summary.get('segments') or []
     for segment in segments:
         used = segment['number'] == run['segment']
@@ -901,6 +933,11 @@ def format_summary(summary):
     lines.append(f"corrections from the {summary['method']}")
     if summary.get('model_check') is not None:
         lines.append(check_line(summary['model_check']))
+    verdict = summary.get('verdict')
+    if verdict is not None:
+        lines.append(f"verdict {verdict['headline']}")
+        if verdict['source'] == 'measured':
+            lines.append(f"  {verdict['layout_expects']}")
     grade = summary['grade']
     if grade is not None:
         before = grade['before']

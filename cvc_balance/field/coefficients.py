@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from cvc_balance.field.influence import Calibration, checked_condition, Trial
+from cvc_balance.field.influence import Calibration, checked_condition, CHI2_2DOF_95, Trial
 from cvc_balance.physics.layout import MAX_MAGNITUDE, short
 
 AGREE = 1e-6
@@ -254,3 +254,30 @@ def at_speed(calibration, record, speed):
     return scaled, (f'the coefficients, made at {recorded:.4g} rad/s, are scaled to the '
                     f'readings\' {speed:.4g} rad/s as the speed squared (x{factor:.4g}; load '
                     'cells of a rigid rotor)')
+
+
+def plane_unbalance(calibration, readings, sigma):
+    """
+    Return (u, covariance): the unbalance per plane that readings imply, R = C u.
+
+    ``readings`` complex, one per sensor of ``calibration`` (its unit); ``sigma`` their
+    standard errors per x and y component. Weighted least squares (exact with as many
+    sensors as planes); ``covariance`` (planes x planes, complex) of u's error per
+    component, from the readings' noise and the coefficients' own 95 % radii (each
+    coefficient's error moves a reading by it times the plane's u). Units: the record's
+    correction unit (kg m from trial runs).
+    """
+    matrix = np.asarray(calibration.matrix, complex)
+    readings = np.asarray(readings, complex)
+    variance = np.maximum(np.asarray(sigma, float) ** 2, 1e-300)
+    u = None
+    for _ in range(2):
+        if u is not None and calibration.ci95 is not None:
+            coefficient = (np.asarray(calibration.ci95, float) ** 2 / CHI2_2DOF_95) \
+                @ (np.abs(u) ** 2)
+            variance = np.asarray(sigma, float) ** 2 + coefficient
+        weight = 1.0 / np.maximum(variance, 1e-300)
+        normal = matrix.conj().T @ (weight[:, None] * matrix)
+        covariance = np.linalg.inv(normal)
+        u = covariance @ (matrix.conj().T @ (weight * readings))
+    return u, covariance

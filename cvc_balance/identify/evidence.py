@@ -2,7 +2,9 @@
 The verdict of record: what the machine's own evidence says, checked against its layout.
 
 A monitor holds two views of a rotor: the declared layout (the model) and, when load cells
-are read, the unbalance they measure. The verdict people read first is the MEASURED
+are read, the unbalance they measure; or, without cells, the unbalance per correction plane
+that vibration sensors' 1x readings give through stored influence coefficients of the
+machine type (:class:`PlaneEstimate`). The verdict people read first is the MEASURED
 rotor's whenever the measurement can tell; the layout's verdict is shown beside it as what
 the layout expects. While the measurement cannot tell (no cells, too few readings or
 revolutions, no speed, its 95 % interval too wide against the limit) the layout's verdict
@@ -49,6 +51,51 @@ CANNOT_TELL = ('the load cells cannot tell yet: too few readings or revolutions,
                'speed')
 LEVEL_ORDER = {assessment.NOT_JUDGED: 0, assessment.OK: 1, assessment.WARN: 2,
                assessment.ERROR: 3}
+LOAD_CELLS = 'the load cells'
+"""What measured the rotor when an estimate does not say (a load cells' fit)."""
+CHI2_2DOF_95 = 5.991464547107979
+"""95 % quantile of chi-square with 2 degrees of freedom: a complex error's 95 % circle."""
+
+
+@dataclass(frozen=True)
+class PlaneEstimate:
+    """
+    A measured unbalance given per correction plane, not fitted from load cells.
+
+    What vibration readings give through stored influence coefficients (readings = C u):
+    ``values`` (u_I, u_II) complex kg m at the layout's correction planes ``z`` (m);
+    ``covariance`` 2x2 (nested tuples) of their errors per x and y component, kg^2 m^2;
+    ``measured_by`` names the instrument for people ('the vibration sensors through
+    coefficients FILE'); ``coefficients`` the coefficients' record named (plain data) or
+    None; ``readings`` how many samples the 1x readings used. Reads as the load cells'
+    fit does (``static`` S, ``products`` P about O, ``ci95``), so one verdict serves both.
+    """
+
+    z: tuple
+    values: tuple
+    covariance: tuple
+    measured_by: str
+    coefficients: dict = None
+    readings: int = 0
+    identifiable: bool = True
+
+    @property
+    def static(self):
+        """Return S = u_I + u_II, kg m."""
+        return complex(self.values[0] + self.values[1])
+
+    @property
+    def products(self):
+        """Return P about O = z_I u_I + z_II u_II, kg m^2 (the planes' moment)."""
+        return complex(self.z[0] * self.values[0] + self.z[1] * self.values[1])
+
+    def ci95(self, weights):
+        """Radius of the 95 % circle of w_S S + w_P P (its units)."""
+        w_s, w_p = weights
+        a = [w_s + z * w_p for z in self.z]        # the same quantity in (u_I, u_II)
+        variance = sum((a[i] * self.covariance[i][j] * a[j].conjugate()).real
+                       for i in range(2) for j in range(2))
+        return math.sqrt(CHI2_2DOF_95 * max(variance, 0.0))
 
 
 @dataclass(frozen=True)
@@ -97,7 +144,9 @@ class VerdictOfRecord:
     ``measured``: the measured rotor's (None without an identifiable measurement);
     ``source``: MEASURED when the measurement can tell, else LAYOUT; ``reason``: why the
     layout's verdict stands (None when measured); ``disagreements``: planes where the
-    rotor is not what its layout says; ``explanation``: what would explain them (or None).
+    rotor is not what its layout says; ``explanation``: what would explain them (or None);
+    ``measured_by``: what measured the rotor ('the load cells', or the vibration sensors
+    through coefficients); ``coefficients``: the coefficients' record named (or None).
     """
 
     level: str
@@ -107,6 +156,8 @@ class VerdictOfRecord:
     reason: str = None
     disagreements: tuple = ()
     explanation: str = None
+    measured_by: str = LOAD_CELLS
+    coefficients: dict = None
 
     @property
     def verdict(self):
@@ -126,9 +177,9 @@ class VerdictOfRecord:
 
     @property
     def source_text(self):
-        """'measured by the load cells' or 'from the layout: <why>'."""
+        """'measured by the load cells' (or what measured it) or 'from the layout: <why>'."""
         if self.source == MEASURED:
-            return 'measured by the load cells'
+            return f'measured by {self.measured_by}'
         return f'from the layout: {self.reason}'
 
     @property
@@ -172,7 +223,8 @@ class VerdictOfRecord:
         source_text, headline,
         layout_expects, disagreement (text), layout_level,
         layout_verdict, layout_equivalent_grade, measured_level, measured_equivalent_grade,
-        reason, disagreements, explanation. None (null) where nothing was computed.
+        reason, disagreements, explanation, measured_by, coefficients. None (null) where
+        nothing was computed.
         """
         layout, measured = self.layout, self.measured
         judged = self.verdict.assessment
@@ -191,6 +243,8 @@ class VerdictOfRecord:
             'reason': self.reason,
             'disagreements': [d.record() for d in self.disagreements],
             'explanation': self.explanation,
+            'measured_by': self.measured_by if self.measured is not None else None,
+            'coefficients': self.coefficients,
         }
 
 
@@ -199,26 +253,34 @@ def _grade_of(verdict):
 
 
 def verdict_of_record(model, estimate=None, top_speed=0.0, grade=None,
-                      warn_fraction=assessment.WARN_FRACTION, residual_warn=RESIDUAL_WARN):
+                      warn_fraction=assessment.WARN_FRACTION, residual_warn=RESIDUAL_WARN,
+                      no_measurement=NO_CELLS, coefficients=None):
     """
     Return the :class:`VerdictOfRecord` of ``model`` (the layout's RotorModel).
 
-    ``estimate``: the load cells' fit (:class:`cvc_balance.identify.fit.Estimate`), None
-    when there are no cells; ``top_speed`` rad/s, ``grade`` mm/s and ``warn_fraction`` as
+    ``estimate``: the load cells' fit (:class:`cvc_balance.identify.fit.Estimate`) or a
+    :class:`PlaneEstimate` (vibration readings through coefficients), None when there is
+    no measurement: then ``no_measurement`` says why the layout's verdict stands (and
+    ``coefficients`` names the record that could not be used); ``top_speed`` rad/s,
+    ``grade`` mm/s and ``warn_fraction`` as
     :func:`cvc_balance.physics.assessment.judge_balance`.
     """
     grade = grade or model.layout.balancing.grade
     layout = assessment.judge_balance(model, top_speed, grade, warn_fraction)
     if estimate is None:
-        return VerdictOfRecord(layout.level, LAYOUT, layout, reason=NO_CELLS)
+        return VerdictOfRecord(layout.level, LAYOUT, layout, reason=no_measurement,
+                               coefficients=coefficients)
+    by = getattr(estimate, 'measured_by', LOAD_CELLS)
+    named = dict(measured_by=by, coefficients=getattr(estimate, 'coefficients', None))
     if not estimate.identifiable:
-        return VerdictOfRecord(layout.level, LAYOUT, layout,
-                               reason=NO_READINGS if not estimate.readings else CANNOT_TELL)
+        return VerdictOfRecord(layout.level, LAYOUT, layout, **named,
+                               reason=NO_READINGS if not estimate.readings
+                               else CANNOT_TELL.replace(LOAD_CELLS, by))
     measured = assessment.judge_balance(rotor_with(model, estimate.static, estimate.products),
                                         top_speed, grade, warn_fraction)
     judged = measured.assessment
     if judged is None:          # no speed to judge at: neither can tell
-        return VerdictOfRecord(layout.level, LAYOUT, layout, measured,
+        return VerdictOfRecord(layout.level, LAYOUT, layout, measured, **named,
                                reason='no service speed and the rotor has not turned')
     found = identified_unbalance(model, estimate)
     diff = residual(found, layout_unbalance(model))
@@ -228,16 +290,18 @@ def verdict_of_record(model, estimate=None, top_speed=0.0, grade=None,
     if too_wide:
         label, ci, allowed = too_wide[0]
         where = 'static unbalance' if label == 'static' else f'plane {label}'
-        reason = (f"the load cells' 95 % interval is too wide yet ({where}: "
+        interval = "the load cells' 95 % interval" if by == LOAD_CELLS \
+            else f'the 95 % interval of {by}'
+        reason = (f"{interval} is too wide yet ({where}: "
                   f'{g_mm(ci):.0f} g mm against its permissible {g_mm(allowed):.0f} g mm)')
-        return VerdictOfRecord(layout.level, LAYOUT, layout, measured, reason=reason)
+        return VerdictOfRecord(layout.level, LAYOUT, layout, measured, reason=reason, **named)
     disagreements = disagreeing(limits, residual_warn)
     level = measured.level
     if disagreements and LEVEL_ORDER[level] < LEVEL_ORDER[assessment.WARN]:
         level = assessment.WARN
     explanation = explain(model, diff) if disagreements else None
     return VerdictOfRecord(level, MEASURED, layout, measured, None, disagreements,
-                           explanation)
+                           explanation, **named)
 
 
 def disagreeing(rows, residual_warn=RESIDUAL_WARN):
@@ -391,5 +455,5 @@ def worst(levels):
 
 
 __all__ = ['CANNOT_TELL', 'Disagreement', 'disagreeing', 'disagreement_text', 'explain',
-           'LAYOUT', 'MEASURED', 'NO_CELLS',
+           'LAYOUT', 'LOAD_CELLS', 'MEASURED', 'NO_CELLS', 'PlaneEstimate',
            'RESIDUAL_WARN', 'verdict_of_record', 'VerdictOfRecord', 'worst']
