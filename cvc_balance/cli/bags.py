@@ -116,7 +116,8 @@ def register(commands):
                                'time, messages, each topic with its type, count and '
                                'serialization format), then the machine it was recorded on, '
                                'the run it is (record --run) and its layouts (name, digest, '
-                               'log time they came into force). Counts and times are of the messages read.')
+                               'log time they came into force). Counts and times are of '
+                               'the messages read.')
     info.add_argument('bag', metavar='BAG', help=BAG_HELP)
     info.add_argument('--json', action='store_true',
                       help='print one JSON object: path, files, bag_size (bytes), '

@@ -5,8 +5,9 @@ For each scene (planar, axial offsets, tilt, spin-up, near-balance, 10^5 compone
 every method of :mod:`cvc_balance.study.methods` computes the loads over motion samples; its
 cost is the best wall time per sample of three runs or more (:data:`TIMED`), its error the
 largest relative deviation from the 40-digit reference (:mod:`cvc_balance.study.exact`)
-over the samples (each output scaled by the reference's largest value of it). Writes a CSV and a log-log chart
-(error against time per sample, one mark per method per scene) and prints the table.
+over the samples (each output scaled by the reference's largest value of it). Writes a CSV
+and a log-log chart (error against time per sample, one mark per method per scene) and
+prints the table.
 
 Two runs: the full one (every scene's samples; costly methods on fewer, WORK_LIMIT) and the
 quick one (the same methods and scenes; costly methods on fewer still,
