@@ -218,20 +218,38 @@ def test_runs_of_one_and_two_periods_and_a_lone_mark():
     assert two.mark_speed().tolist() == [TWO_PI / 0.5] * 2
 
 
+def hermite_by_hand(t, speed, k, share):
+    """
+    Angle, speed and acceleration a share (0..1) into period k, by the motion's definition.
+
+    The cubic from 2 pi k to 2 pi (k + 1) whose slopes at the marks are their fitted speeds:
+    Hermite's basis written out here, its derivatives by hand.
+    """
+    h = t[k + 1] - t[k]
+    m0, m1, s = speed[k] * h, speed[k + 1] * h, share
+    angle = TWO_PI * k + (s**3 - 2 * s**2 + s) * m0 + (-2 * s**3 + 3 * s**2) * TWO_PI \
+        + (s**3 - s**2) * m1
+    omega = ((3 * s**2 - 4 * s + 1) * m0 + (6 * s - 6 * s**2) * TWO_PI
+             + (3 * s**2 - 2 * s) * m1) / h
+    alpha = ((6 * s - 4) * m0 + (6 - 12 * s) * TWO_PI + (6 * s - 2) * m1) / h**2
+    return angle, omega, alpha
+
+
 def test_angle_speed_and_acceleration_between_marks_by_hand():
     t = ramp_marks(10)
     marks = Marks(t, np.array([True] * 4 + [False] + [True] * 4), 10)
-    speed = marks.mark_speed()
-    # A third of the way through period 2; at the marks themselves; the last period.
+    speed = marks.fitted_speed()
+    # A third of the way through period 2; at the marks themselves (a mark starts its
+    # period; the last mark ends the last one); half way through the last period.
     at = np.array([t[2] + (t[3] - t[2]) / 3, t[0], t[3], t[9], t[8] + 0.5 * (t[9] - t[8])])
+    where = [(2, 1 / 3), (0, 0.0), (3, 0.0), (8, 1.0), (8, 0.5)]
     angle, omega, alpha = marks.motion(at)
-    assert angle.tolist() == pytest.approx([TWO_PI * (2 + 1 / 3), 0.0, TWO_PI * 3,
-                                            TWO_PI * 9, TWO_PI * 8.5], rel=1e-14)
-    assert omega[0] == pytest.approx(speed[2] + (speed[3] - speed[2]) / 3, rel=1e-14)
-    assert alpha[0] == pytest.approx((speed[3] - speed[2]) / (t[3] - t[2]), rel=1e-14)
-    # At a mark the period that starts there (the last mark: the one that ends there).
-    assert alpha[2] == pytest.approx((speed[4] - speed[3]) / (t[4] - t[3]), rel=1e-14)
-    assert alpha[3] == pytest.approx((speed[9] - speed[8]) / (t[9] - t[8]), rel=1e-14)
+    for n, (k, share) in enumerate(where):
+        expected = hermite_by_hand(t, speed, k, share)
+        assert (angle[n], omega[n], alpha[n]) == pytest.approx(expected, rel=1e-12, abs=1e-9)
+    # The cubic passes through the marks' turns and takes their fitted speeds there.
+    assert angle[1:4].tolist() == pytest.approx([0.0, TWO_PI * 3, TWO_PI * 9], abs=1e-12)
+    assert omega[1:4].tolist() == pytest.approx(speed[[0, 3, 9]].tolist(), rel=1e-12)
     assert marks.angle(at).tolist() == angle.tolist()
     # NaN before, after, and in the irregular period 4.
     outside = np.array([t[0] - 1e-9, t[9] + 1e-9, 0.5 * (t[4] + t[5])])

@@ -159,7 +159,7 @@ REFUSED = [
     (drop(1, 'z', 'supports'), "support 'rear': missing field z"),
     (support(1, z='far'), "support 'rear': field z must be a number, got 'far'"),
     (support(1, stiffness=1e9), "support 'rear': unknown field 'stiffness' (known: name, z, "
-                                'axial)'),
+                                'axial, bearing)'),
     (support(1, axial='yes'), "support 'rear': field axial must be true or false, got 'yes'"),
     (support(1, name='front'), "support 'front': duplicate name (names must be unique)"),
     (support(1, z=-0.25), 'layout: field supports: the two supports need different z'),

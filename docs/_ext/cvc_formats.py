@@ -51,7 +51,10 @@ def _known(message):
 LAYOUT_PROBE = {
     'name': 'probe', 'description': 'a rotor to probe the reader with',
     'components': [{'name': 'c', 'mass': 1.0, 'radius': 0.5, 'angle_deg': 0.0, 'z': 0.0}],
-    'supports': [{'name': 'front', 'z': -0.1}, {'name': 'rear', 'z': 0.1, 'axial': True}],
+    'supports': [{'name': 'front', 'z': -0.1,
+                  'bearing': {'C': 180000.0, 'type': 'ball', 'X': 0.35, 'Y': 0.57, 'e': 1.14,
+                              'a1': 1.0, 'limit_speed': 60.0}},
+                 {'name': 'rear', 'z': 0.1, 'axial': True}],
     'gravity': [0.0, -9.80665, 0.0],
     'balancing': {
         'planes': [-0.1, 0.1], 'correction_radius': 0.5, 'grade': 6.3, 'service_speed': 10.0,
@@ -126,6 +129,19 @@ LAYOUT_SECTIONS = [
          'z': ('m: its axial position', 'front'),
          'axial': ('`true` on exactly one of two supports: it takes the axial force '
                    '(default false)', 'yes'),
+         'bearing': ('what the bearing is, for its ISO 281 rating life (below; without it no '
+                     'life is computed for this support)', 'SKF 6012'),
+     }),
+    ('bearing', ('supports', 0, 'bearing'), 'A bearing',
+     'A support\'s `bearing`: ISO 281\'s basic rating life from the loads on it (the docs\' '
+     '"Bearing life"). A layout without bearings keeps its digest.', {
+         'C': ('N, > 0: the basic dynamic load rating, from the maker\'s catalogue', 0),
+         'type': ('`ball` or `roller` (default ball): the life exponent 3 or 10/3', 'needle'),
+         'X': ('the radial load factor of P = X Fr + Y Fa (default 1)', -1),
+         'Y': ('the axial load factor (default 0: radial only)', -1),
+         'e': ('the Fa / Fr beyond which X and Y hold; up to it P = Fr (default: always)', 0),
+         'a1': ('the life adjustment factor for reliability (default 1: L10, 90 %)', 2),
+         'limit_speed': ('rad/s: the maker\'s limiting speed (default: not said)', -1),
      }),
     ('balancing', ('balancing',), 'Balancing',
      'How the rotor is judged (ISO 21940-11) and corrected. Optional.', {
