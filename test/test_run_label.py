@@ -166,3 +166,32 @@ def test_record_writes_the_label(tmp_path):
     assert metadata_of(out)['cvc_balance'] == {'machine_id': 'gantry-7', 'run': 'check'}
     code, text, _ = run_cli('info', out)
     assert 'Run:               check run' in text.splitlines()
+
+
+def test_the_node_labels_its_recording_and_refuses_a_label_that_cannot_be(tmp_path):
+    """The node's record_run / record_trial parameters, as its own process."""
+    from ros_harness import NodeProcess
+    out = tmp_path / 'trial_II.mcap'
+    node = NodeProcess('cvc_balance.ros.balance_monitor',
+                       ['-p', f'record_path:={out}', '-p', 'record_run:=trial',
+                        '-p', f'record_trial:={TRIAL_II}'], tmp_path / 'node.log')
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not out.exists():
+        time.sleep(0.1)
+    time.sleep(1.5)         # the bag is made while the node starts; it spins after
+    assert node.stop(signal.SIGINT) == 0, node.log()
+    assert metadata_of(out)['cvc_balance'] == {'run': 'trial', 'trial': 'II:0.2@0.0,0.68'}
+    code, text, _ = run_cli('info', out)
+    assert 'Run:               trial run: plane II, 0.2 kg at 0 deg, r 0.68 m' in \
+        text.splitlines()
+    for params, says in (
+            ([f'record_path:={tmp_path / "a.mcap"}', 'record_run:=trail'],
+             "parameters record_run/record_trial: record_run: give one of baseline, trial, "
+             "check, trim, got 'trail'"),
+            (['record_run:=check'], 'record_run and record_trial label a recording: set '
+             'record_path')):
+        bad = NodeProcess('cvc_balance.ros.balance_monitor',
+                          [a for p in params for a in ('-p', p)], tmp_path / 'bad.log')
+        bad.process.wait(60)
+        assert (bad.stop(), bad.log().strip()) == (2, f'balance_monitor: error: {says}')
+    assert not (tmp_path / 'a.mcap').exists()

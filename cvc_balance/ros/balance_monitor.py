@@ -122,6 +122,11 @@ PARAMETERS = (
      'of the /diagnostics statuses, and written into the recording (MCAP metadata, '
      "metadata.yaml custom_data) for cvc-balance fleet; empty: none (hardware_id: the node's "
      'name)', None),
+    ('record_run', '', 'what run of a field-balancing visit the recording is (baseline, '
+     'trial, check or trim), written into it for cvc-balance calibrate; empty: unlabelled',
+     None),
+    ('record_trial', '', 'with record_run trial: the trial weight on the rotor, '
+     'PLANE:MASS_KG@ANGLE_DEG,RADIUS_M (e.g. I:0.2@0,0.68)', None),
     ('rerun', '', 'rerun view of the run: save (to rerun_target, an .rrd), connect (to the '
      'viewer at rerun_target) or spawn (a viewer); empty: off', None),
     ('rerun_target', '', '.rrd path (save) or viewer URL (connect)', None),
@@ -195,6 +200,24 @@ def prepare_layout(text, source):
         return str(error)
     except Exception as error:     # a bug must not take the node down: the layout is refused
         return f'{source}: {type(error).__name__}: {one_line(error)}'
+
+
+def recording_label(kind, trial):
+    """
+    Return the RunLabel of the record_run and record_trial parameters (None: unlabelled).
+
+    ValueError names the parameter that is wrong (the node then refuses to start).
+    """
+    from cvc_balance.bag.run_label import run_label
+    try:
+        if not kind:
+            if trial:
+                raise ValueError('--trial goes with --run trial (say what run this is)')
+            return None
+        return run_label(kind, trial or None)
+    except ValueError as error:
+        said = str(error).replace('--run', 'record_run').replace('--trial', 'record_trial')
+        raise ValueError(f'parameters record_run/record_trial: {said}') from None
 
 
 class ActiveLayout:
@@ -277,13 +300,17 @@ class BalanceMonitor(Node):
         self._life = BearingLife(state_path(self.params['record_path'], self._hardware_id)
                                  if self.params['record_path'] else None, self._log_at)
         self._life_counting = None      # the LifeCounters of the layout in force, if any
+        label = recording_label(self.params['record_run'], self.params['record_trial'])
         if self.params['record_path']:
             # Inputs and diagnostics through raw subscriptions; the outputs are written as
             # they are published (no second trip through DDS).
             self._recorder = BagRecorder(self, self.params['record_path'],
                                          (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT,
                                           topics.measured_load('*'), topics.DIAGNOSTICS),
-                                         machine_id=self.params['machine_id'] or None)
+                                         machine_id=self.params['machine_id'] or None,
+                                         label=label)
+        elif label is not None:
+            raise ValueError('record_run and record_trial label a recording: set record_path')
             for topic in topics.OUTPUTS:
                 self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
         if self.params['layout_file']:
