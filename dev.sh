@@ -2,6 +2,7 @@
 # cvc_balance developer entry point: sets up .venv on first use, then runs a job.
 #   ./dev.sh demo      the main job: a bundled bag played live into the node; its verdict, run, .rrd
 #   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
+#   ./dev.sh test --quick   the edit-test loop: the pytest suite without its slow tests
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
 #   ./dev.sh pictures [NAME ...]  make every picture the docs show again (docs/pictures.md)
@@ -187,11 +188,19 @@ case "$cmd" in
     demo ;;
   test)
     setup
-    vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
-    node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
-    chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
-    colcon_check
-    cd "$here" && in_venv python -m pytest "$@" ;;
+    if [ "${1:-}" = --quick ]; then
+      # Seconds, not minutes: no colcon, no test marked slow (setup.cfg says which are).
+      shift
+      set -- -m "not slow" "$@"
+    else
+      vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
+      node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
+      chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
+      colcon_check
+    fi
+    # One worker per core (CVC_TEST_WORKERS overrides); a file stays on one worker, in its
+    # order, with its module fixtures made once. Each worker has its own ROS domain id.
+    cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile "$@" ;;
   run)
     setup
     in_venv "$@" ;;
@@ -208,6 +217,6 @@ case "$cmd" in
     setup
     bags ;;
   *)
-    sed -n '2,9p' "$0" >&2
+    sed -n '2,10p' "$0" >&2
     exit 2 ;;
 esac
