@@ -41,6 +41,7 @@ from cvc_balance.bag.mcap_reader import BagError, joint_samples
 from cvc_balance.bag.replay import read_inputs, replay
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.bag.scenario import load_scenario, write_bag
+from in_process import cvc
 from scenario_reference import expected_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -435,7 +436,8 @@ def test_namespaced_topics_and_the_topic_options(reference, tmp_path):
         replay(two)
     names = InputTopics('/gantry/joint_states', layout='gantry/layout')
     assert_inputs_read(two, run, names)
-    # The command line: options, and bad topics named with what the bag has.
+    # The command line (its own process once, then in this one): options, and bad topics
+    # named with what the bag has.
     cli = [sys.executable, '-m', 'cvc_balance.cli']
     ok = subprocess.run(cli + ['replay', str(two), '--joint-states', '/gantry/joint_states',
                                '--layout-topic', '/gantry/layout'], capture_output=True, text=True)
@@ -450,12 +452,10 @@ def test_namespaced_topics_and_the_topic_options(reference, tmp_path):
              "'config/ct_gantry.yaml' (a layout file goes with --layout-file FILE)")):
         for command in ('replay', 'view'):
             extra = ['-o', str(tmp_path / 'v.rrd')] if command == 'view' else []
-            bad = subprocess.run(cli + [command, str(two), *args, *extra], capture_output=True,
-                                 text=True)
+            bad = cvc(command, two, *args, *extra)
             assert bad.returncode == 2 and words in bad.stderr, (command, bad.stderr)
             assert 'Traceback' not in bad.stderr
-    speed_only = subprocess.run(cli + ['replay', str(two), '--speed-topic', '/gantry/speed'],
-                                capture_output=True, text=True)
+    speed_only = cvc('replay', two, '--speed-topic', '/gantry/speed')
     assert speed_only.returncode == 2 and 'no topic /gantry/speed' in speed_only.stderr
 
 
@@ -482,8 +482,7 @@ def test_truncated_foreign_bag_is_read_up_to_its_last_whole_chunk(run, tmp_path)
         motion = joint_samples(bag, bag.channel('joint_states', JOINT_STATE), 'gantry_joint')
         assert len(motion.stamp) == expected > 0, fraction
         assert np.array_equal(motion.angle, run.angle[:expected])
-        command = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay', str(cut)],
-                                 capture_output=True, text=True)
+        command = cvc('replay', cut)
         assert command.returncode == 0 and 'problem: file ends' in command.stdout
         assert f'{expected} motion samples' in command.stdout
 
@@ -572,7 +571,9 @@ def test_not_a_bag_gets_one_line(tmp_path):
                         (tmp_path / 'bad_meta', 'metadata.yaml: unreadable'),
                         (tmp_path / 'notes.txt', 'not a bag'),
                         (tmp_path / 'missing', 'No such file or directory')):
-        run = subprocess.run(cli + [str(path)], capture_output=True, text=True)
+        # The first as its own process (what a person sees), the others in this one.
+        run = cvc('replay', path) if path.name != 'empty_dir' else \
+            subprocess.run(cli + [str(path)], capture_output=True, text=True)
         assert run.returncode == 2 and words in run.stderr, (path, run.stderr)
         assert run.stderr.count('\n') == 1 and 'Traceback' not in run.stderr
 

@@ -1,0 +1,27 @@
+"""
+``cvc-balance ARGS`` run in the test's own process, its result read as a finished process's.
+
+A new process pays Python, numpy, rclpy and the readers' imports (1-2 s each time on the
+2-core machine); where the command line's words and exit code are what is tested, not the
+process, this gives the same exit code and the same text on stdout and stderr.
+``test/test_command_line_edges.py`` runs every command as its own process.
+"""
+
+import contextlib
+import io
+import subprocess
+
+from cvc_balance.cli import main
+
+
+def cvc(*args):
+    """Run the command line here: a CompletedProcess (returncode, stdout, stderr: text)."""
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as stop:          # argparse: --help, or a bad command line
+            code = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
+    return subprocess.CompletedProcess(['cvc-balance', *argv], code, out.getvalue(),
+                                       err.getvalue())
