@@ -30,6 +30,7 @@ from cvc_balance.identify.evidence import explain, verdict_of_record
 from cvc_balance.identify.estimate import layout_unbalance, residual, unbalance_from
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
+from in_process import cvc
 from independent import PinocchioRotor, TYPESTORE
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,8 +134,7 @@ def bags(tmp_path_factory):
 
 
 def cli(*args, check=True):
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', *map(str, args)],
-                         capture_output=True, text=True, timeout=300)
+    run = cvc(*args)            # in this process; the live test below runs `play` as its own
     if check:
         assert run.returncode == 0, run.stderr
     return run
