@@ -3,8 +3,9 @@
 
 A new process pays Python, numpy, rclpy and the readers' imports (1-2 s each time on the
 2-core machine); where the command line's words and exit code are what is tested, not the
-process, this gives the same exit code and the same text on stdout and stderr.
-``test/test_command_line_edges.py`` runs every command as its own process.
+process, this gives the same exit code and the same text on stdout and stderr. Each command is
+still run as its own process by some test (``test/test_command_line_edges.py``: every
+command's help; the live tests: play and record; the others where a file keeps one).
 """
 
 import contextlib

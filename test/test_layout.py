@@ -12,6 +12,7 @@ import yaml
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import LayoutError, parse_layout
 from cvc_balance.physics.layout_file import layout_from_text, load_layout
+from in_process import cvc
 
 ROOT = Path(__file__).resolve().parents[1]
 GANTRY = ROOT / 'config' / 'ct_gantry.yaml'
@@ -35,8 +36,8 @@ def edited(change):
 
 
 def run_solve(path, *extra):
-    return subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'solve', str(path),
-                           '--omega', '20', *extra], capture_output=True, text=True)
+    # In this process: the layout's refusal is tested here, `solve` as a process below.
+    return cvc('solve', path, '--omega', '20', *extra)
 
 
 def assert_one_line_error(run, *needles):
