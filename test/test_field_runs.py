@@ -36,6 +36,7 @@ from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.layout_file import load_layout
 from cvc_balance.physics.unbalance import plane_unbalances
+from in_process import cvc
 
 ROOT = Path(__file__).resolve().parents[1]
 FIELD_LAYOUT = ROOT / 'config' / 'ct_gantry_field.yaml'
@@ -48,6 +49,11 @@ SUPPORTS = (-0.12, 0.12)
 
 
 def cli(*args):
+    # In this process (test/in_process.py); the README's commands run as processes below.
+    return cvc(*args)
+
+
+def process(*args):
     return subprocess.run([sys.executable, '-m', 'cvc_balance.cli', *map(str, args)],
                           capture_output=True, text=True)
 
@@ -384,7 +390,7 @@ def bundled_coefficients(tmp_path_factory):
 
 
 def test_bundled_runs_readme_commands(bundled_coefficients):
-    done = cli('correct', BUNDLED[0], '--coefficients', bundled_coefficients, '--json')
+    done = process('correct', BUNDLED[0], '--coefficients', bundled_coefficients, '--json')
     assert done.returncode == 0, done.stderr
     summary = strict_json(done.stdout)
     assert summary['grade']['before']['within_grade'] is False     # G 9.2: out of G 6.3
@@ -395,7 +401,7 @@ def test_bundled_runs_readme_commands(bundled_coefficients):
                for w in optimal['weights'])
     sites = {round(a, 6) for a in np.arange(0.0, 360.0, 15.0)}
     assert all(round(w['angle_deg'], 6) in sites for w in optimal['weights'])
-    done = cli('correct', BUNDLED[0])
+    done = process('correct', BUNDLED[0])
     assert done.returncode == 0 and 'identified unbalance' in done.stdout
 
 
