@@ -17,14 +17,20 @@ import sys
 import pytest
 
 from cvc_balance.files import check_output, OutputError, replaced_when_done
+from in_process import cvc
 
 ROOT = Path(__file__).resolve().parents[1]
 BAG = ROOT / 'bags' / 'tilted_shift.mcap'
 
 
-def cli(*args, timeout=120):
+def process(*args, timeout=120):
     return subprocess.run([sys.executable, '-m', 'cvc_balance.cli', *map(str, args)],
                           capture_output=True, text=True, timeout=timeout)
+
+
+def cli(*args, timeout=120):
+    # In this process, but `record` (a ROS node) and the finished replay below: processes.
+    return process(*args, timeout=timeout) if args[0] == 'record' else cvc(*args)
 
 
 def digest(path):
@@ -84,7 +90,7 @@ def test_outputs_into_missing_folders_are_refused_before_any_work(bag, tmp_path)
 def test_a_finished_replay_leaves_its_output_and_nothing_else(bag, tmp_path):
     out = tmp_path / 'out.mcap'
     out.write_bytes(b'an older file of that name')
-    run = cli('replay', bag, '-o', out, '--rrd', tmp_path / 'run.rrd')
+    run = process('replay', bag, '-o', out, '--rrd', tmp_path / 'run.rrd')
     assert run.returncode == 0, run.stderr
     assert out.read_bytes()[:8] == b'\x89MCAP0\r\n'          # replaced, a whole bag
     assert sorted(p.name for p in tmp_path.iterdir()) == ['out.mcap', 'run.mcap', 'run.rrd']
