@@ -22,14 +22,13 @@ import json
 import math
 import re
 import signal
-import subprocess
-import sys
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
 from sensor_msgs.msg import JointState
 import yaml
 
+from in_process import cvc
 from test_balance_monitor import (diagnostic_values, joint_state, probe,  # noqa: F401
                                   start_node, vector, wait_for_diagnostics,
                                   wait_until_connected)
@@ -57,8 +56,7 @@ def write(tmp_path, layout):
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, '-m', 'cvc_balance.cli', *map(str, args)],
-                          capture_output=True, text=True, timeout=120)
+    return cvc(*args)               # in this process (test/in_process.py)
 
 
 def number_before(text, unit, label):
