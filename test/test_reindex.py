@@ -28,6 +28,7 @@ import yaml
 
 from cvc_balance.bag.mcap_reader import Bag
 from cvc_balance.bag.reindex import reindex
+from in_process import cvc
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / 'bags' / 'loose_bracket.mcap'
@@ -108,9 +109,7 @@ def test_a_whole_bag_is_left_alone(tmp_path):
 
 def test_a_killed_directory_gets_its_metadata_back(tmp_path):
     directory = tmp_path / 'run'
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'simulate',
-                          ROOT / 'bags' / 'loose_bracket.yaml', '-o', directory],
-                         capture_output=True, text=True)
+    run = cvc('simulate', ROOT / 'bags' / 'loose_bracket.yaml', '-o', directory)
     assert run.returncode == 0, run.stderr
     inner = directory / 'run_0.mcap'
     data = inner.read_bytes()
@@ -209,8 +208,7 @@ def test_a_flipped_length_byte_costs_no_message(where, whole, tmp_path):
             rosbags_messages(path)
     else:
         assert rosbags_messages(path) == whole
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'reindex', path],
-                         capture_output=True, text=True)
+    run = cvc('reindex', path)          # in this process; the command's own: above and below
     assert run.returncode == 0, run.stderr
     result = tmp_path / 'damaged.reindexed.mcap'
     assert run.stdout.startswith(f'{path}: 19 chunks, 10113 messages; written to {result}\n')
@@ -318,9 +316,7 @@ def test_the_machine_id_survives_reindex_of_files_cut_anywhere(recorded, tmp_pat
             statistics = make_reader(stream).get_summary().statistics
         assert statistics.metadata_count == 2     # rosbag2's first record and ours
     # replay --json gives the id after reindex, as before
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay',
-                          tmp_path / f'cut_{cuts[-1]}.reindexed.mcap', '--json'],
-                         capture_output=True, text=True)
+    run = cvc('replay', tmp_path / f'cut_{cuts[-1]}.reindexed.mcap', '--json')
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)['machine_id'] == MACHINE
 
