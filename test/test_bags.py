@@ -29,6 +29,7 @@ from cvc_balance.bag.scenario import load_scenario, write_bag
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.unbalance import static_unbalance
+from in_process import cvc
 from ros_harness import ros_environment
 from scenario_reference import expected_outputs
 
@@ -114,8 +115,7 @@ def test_bundled_bags_decode_equal_to_a_fresh_simulation(scenario_file, tmp_path
     bag = scenario_file.with_suffix('.mcap')
     assert bag.stat().st_size < 2 * 1024 * 1024
     fresh = tmp_path / bag.name          # the same name: rosbag2's record lists the file
-    run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'simulate', scenario_file,
-                          '-o', fresh], capture_output=True, text=True)
+    run = cvc('simulate', scenario_file, '-o', fresh)     # in this process
     assert run.returncode == 0, run.stderr
     bundled, simulated = bag_contents(bag), bag_contents(fresh)
     for part in ('header', 'schemas', 'channels', 'metadata'):
@@ -269,8 +269,10 @@ def test_truncated_bag_uses_what_could_be_read(tmp_path):
         summary = replay(cut)
         assert any('truncated' in p for p in summary.problems)
         assert 0 < summary.accepted < full.accepted
-        run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay', str(cut)],
-                             capture_output=True, text=True)
+        # The command once as its own process (what a person sees), then in this one.
+        run = cvc('replay', cut) if fraction != 0.3 else subprocess.run(
+            [sys.executable, '-m', 'cvc_balance.cli', 'replay', str(cut)],
+            capture_output=True, text=True)
         assert run.returncode == 0 and 'truncated' in run.stdout
         assert 'Traceback' not in run.stderr
 
@@ -307,8 +309,9 @@ def test_bags_without_inputs_or_with_wrong_types_get_a_clear_message(tmp_path):
     not_a_bag.write_text('hello')
     for path, words in ((empty, 'no joint_states'), (wrong, 'expected'),
                         (not_a_bag, 'not an MCAP file')):
-        run = subprocess.run([sys.executable, '-m', 'cvc_balance.cli', 'replay', str(path)],
-                             capture_output=True, text=True)
+        run = cvc('replay', path) if path != empty else subprocess.run(
+            [sys.executable, '-m', 'cvc_balance.cli', 'replay', str(path)],
+            capture_output=True, text=True)         # the first as its own process
         assert run.returncode == 2 and words in run.stderr and 'Traceback' not in run.stderr
 
 
