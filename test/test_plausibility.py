@@ -19,6 +19,7 @@ import yaml
 
 from cvc_balance.physics.layout import parse_layout
 from cvc_balance.physics.plausibility import layout_warnings
+from in_process import cvc
 
 ROOT = Path(__file__).resolve().parents[1]
 GANTRY = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
@@ -107,6 +108,10 @@ def cli(*args):
                           capture_output=True, text=True, timeout=120)
 
 
+def here(*args):
+    return cvc(*args)        # in this process (test/in_process.py): no Python start-up
+
+
 def test_solve_warns_on_stderr_keeps_the_results_and_its_columns_apart(tmp_path):
     """radius: 620 (mm for m): warned; loads of tens of MN still in separate columns."""
     path = tmp_path / 'mm.yaml'
@@ -119,7 +124,7 @@ def test_solve_warns_on_stderr_keeps_the_results_and_its_columns_apart(tmp_path)
             cells = [c for c in line.split('  ') if c.strip()]
             numbers = [c for c in cells if c.strip().lstrip('-').replace('.', '').isdigit()]
             assert len(numbers) >= 3, line        # each number its own cell
-    data = json.loads(cli('solve', path, '--omega', 23.27, '--json').stdout)
+    data = json.loads(here('solve', path, '--omega', 23.27, '--json').stdout)
     assert data['warnings'] == [w for w in run.stderr.split('warning: ')[1:]
                                 for w in [w.split(': ', 1)[1].strip()]]
     # The 620 m tube: U = 60 kg x 620 m more than the real gantry's, G in the thousands.
@@ -132,12 +137,12 @@ def test_replay_and_the_view_say_the_warning_with_the_layout(tmp_path):
         'name': 'degrees', 'layout': gantry_with(1, angle=90), 'rate': 100,
         'profile': [{'type': 'spin_up', 'to': 10.0, 'alpha': 10.0}]}))
     bag = tmp_path / 'degrees.mcap'
-    assert cli('simulate', scenario, '-o', bag).returncode == 0
-    run = cli('replay', bag)
+    assert here('simulate', scenario, '-o', bag).returncode == 0
+    run = here('replay', bag)
     assert run.returncode == 0
     assert "  warning: component 'xray_tube': angle 90 rad" in run.stdout
     rrd = tmp_path / 'degrees.rrd'
-    assert cli('view', bag, '-o', rrd).returncode == 0
+    assert here('view', bag, '-o', rrd).returncode == 0
     from rerun.chunk import RrdReader
     texts = []
     for chunk in RrdReader(str(rrd)).stream():

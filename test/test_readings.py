@@ -23,6 +23,7 @@ from cvc_balance.bag.channels import (channel_samples, keyphasor_motion, read_ke
 from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.bag.readings import bag_readings
 from cvc_balance.bag.rosbag2 import open_bag
+from in_process import cvc
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 START_NS = 1_700_000_000 * 10 ** 9
@@ -151,6 +152,10 @@ def rig(tmp_path_factory):
 def cli(*args):
     return subprocess.run([sys.executable, '-m', 'cvc_balance.cli', *map(str, args)],
                           capture_output=True, text=True)
+
+
+def here(*args):
+    return cvc(*args)        # in this process (test/in_process.py): no Python start-up
 
 
 def independent_fit(times_ns, values, start, end):
@@ -312,7 +317,7 @@ def test_the_command_prints_what_people_read(rig):
     assert [float(a[2]) for a in accel] == pytest.approx([LAG_DEG, LAG_DEG], abs=2.0)
     assert [a[-1] for a in accel] == ['m/s^2', 'm/s^2']
     assert [line.split()[-1] for line in lines if line.startswith('  accel3/')] == ['g'] * 6
-    done = cli('readings', rig, '--json')
+    done = here('readings', rig, '--json')
     assert done.returncode == 0, done.stderr
     summary = json.loads(done.stdout)
     assert list(summary) == ['segments']
@@ -339,7 +344,7 @@ def test_the_command_prints_what_people_read(rig):
                                   'speed), got 0 %']),
 ])
 def test_bad_input_is_one_line_and_exit_2(rig, args, needles):
-    done = cli('readings', rig, *args)
+    done = here('readings', rig, *args)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and 'Traceback' not in done.stderr, done.stderr
