@@ -1,5 +1,7 @@
-"""Shared fixtures: no node process outlives its test, even a failed one; the slow mark."""
+"""Shared fixtures: no node process outlives its test, even a failed one; slow and alone."""
 
+import fcntl
+import os
 from pathlib import Path
 
 import pytest
@@ -17,6 +19,24 @@ def pytest_collection_modifyitems(config, items):
         file = f'{item.path.parent.name}/{item.path.name}'
         if file in SLOW or f'{file}::{item.originalname}' in SLOW:
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture(autouse=True)
+def alone_when_marked(request, tmp_path_factory):
+    """
+    With pytest-xdist workers, run a test marked ``alone`` with no other test beside it.
+
+    Every test holds a shared lock on a file of this run (in the workers' common temporary
+    folder) while it runs; a test marked alone holds it exclusively, so it waits for the
+    other workers' tests to end and they wait for it.
+    """
+    if 'PYTEST_XDIST_WORKER' not in os.environ:     # one process: nothing runs beside a test
+        yield
+        return
+    with open(tmp_path_factory.getbasetemp().parent / 'alone.lock', 'a') as lock:
+        alone = request.node.get_closest_marker('alone') is not None
+        fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
+        yield
 
 
 @pytest.fixture(autouse=True)
