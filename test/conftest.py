@@ -8,17 +8,25 @@ import pytest
 
 from ros_harness import NodeProcess
 
-SLOW = {line.strip() for line in (Path(__file__).parent / 'slow_tests.txt').read_text()
-        .splitlines() if line.strip() and not line.startswith('#')}
+def _listed(name):
+    """Return the tests a list beside this file names (``file::function`` or ``file``)."""
+    return {line.strip() for line in (Path(__file__).parent / name).read_text().splitlines()
+            if line.strip() and not line.startswith('#')}
+
+
+SLOW = _listed('slow_tests.txt')
 """Tests marked slow (``file::function``, or a whole ``file``): ``--quick`` leaves them out."""
+ALONE = _listed('alone_tests.txt')
+"""Tests marked alone: under xdist no other test runs beside them (live timing)."""
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark each test named in slow_tests.txt slow (every parameter of it; a file: all)."""
+    """Mark each test named in slow_tests.txt slow, in alone_tests.txt alone (a file: all)."""
     for item in items:
         file = f'{item.path.parent.name}/{item.path.name}'
-        if file in SLOW or f'{file}::{item.originalname}' in SLOW:
-            item.add_marker(pytest.mark.slow)
+        for listed, mark in ((SLOW, pytest.mark.slow), (ALONE, pytest.mark.alone)):
+            if file in listed or f'{file}::{item.originalname}' in listed:
+                item.add_marker(mark)
 
 
 @pytest.fixture(autouse=True)
