@@ -128,7 +128,7 @@ def select_channel(channels, topic, msg_type, where, option=None, exact=False):
 
 def describe_topics(channels):
     """Return 'topic (type), ...' of ``channels``, sorted, or 'none'."""
-    found = sorted({(c.topic, c.msg_type or '(no schema)') for c in channels})
+    found = sorted({(c.topic, c.msg_type or 'no schema') for c in channels})
     return ', '.join(f'{t} ({m})' for t, m in found) or 'none'
 
 
