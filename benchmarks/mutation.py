@@ -110,6 +110,9 @@ MODULES = {
     'field_model_check': ('cvc_balance/field/model_check.py',
                           ['test/test_field_mistakes.py', 'test/test_field_procedure.py']),
     'field_search': ('cvc_balance/field/search.py', ['test/test_field_plans.py']),
+    # The node's pure parts: in this process (the node itself runs in another).
+    'ros_input_checks': ('cvc_balance/ros/input_checks.py',
+                         ['test/test_independent_input_checks.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
                     'simulate', 'charts')},

@@ -1,0 +1,129 @@
+"""
+The node's input checks (:mod:`cvc_balance.ros.input_checks`) in this process, by hand.
+
+The node runs them on its live input (test/test_input_mistakes.py, through a ROS graph,
+which a mutation run cannot see); here the same object is fed samples and a fit by hand:
+a steady turn at 2 rad/s sampled at 1 kHz, its position in radians or in degrees (the
+angle's rate 180 / pi = 57.2958 times the velocity), and cells whose static loads are
+their supports' shares, or one of them with its sign reversed. Each status's level, line
+and values and each log line are asserted as a person reads them.
+"""
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from cvc_balance.identify.mistakes import DEGREES_PER_RADIAN
+from cvc_balance.physics import assessment
+from cvc_balance.ros.input_checks import InputChecks, WINDOW
+
+OMEGA, RATE = 2.0, 1000.0
+
+
+def turn(checks, seconds, scale=1.0, start=0.0):
+    """Feed a steady turn: position ``scale`` x the angle (rad), velocity in rad/s."""
+    for t in start + np.arange(int(seconds * RATE)) / RATE:
+        checks.sample(float(t), scale * OMEGA * float(t), OMEGA)
+
+
+def no_cells():
+    return SimpleNamespace(cells=SimpleNamespace(found=None), shares={})
+
+
+def cells(biases, read=('front', 'rear')):
+    """A layout in force whose cells were fitted with these static loads (complex N)."""
+    shares = {'front': complex(0.0, -3000.0), 'rear': complex(0.0, -1000.0)}
+    model = SimpleNamespace(supports=[SimpleNamespace(name='front'),
+                                      SimpleNamespace(name='rear')])
+    estimate = SimpleNamespace(identifiable=True, biases=np.array(biases))
+    return SimpleNamespace(shares=shares, cells=SimpleNamespace(
+        found=(estimate,), model=model, readings={name: [1] for name in read}))
+
+
+def test_before_any_turn_nothing_can_be_told():
+    """No samples (or one): OK, 'nothing to check yet', the ratio 'not told yet'."""
+    checks = InputChecks()
+    for _ in range(2):
+        assert checks.status(no_cells()) == (
+            assessment.OK, 'inputs: nothing to check yet (no turn, no fit of the cells)',
+            {'joint position rate / velocity': 'not told yet', 'input mistakes': ''})
+        assert checks.news() == []
+        checks.sample(0.0, 0.0, OMEGA)
+
+
+def test_a_position_in_degrees_is_said_once_and_its_mending_once():
+    """
+    Degrees: WARN with the ratio by hand (57.3); logged once; radians again: 'agree again'.
+
+    The window holds the last WINDOW samples: after a restart (a new time line) and a
+    second of radians the ratio is 1 (exactly: steps and trapezoids of a steady turn).
+    """
+    checks = InputChecks()
+    turn(checks, 0.4, scale=DEGREES_PER_RADIAN)      # turned 0.8 rad: too little to tell
+    assert checks.status(no_cells())[0] == assessment.OK
+    turn(checks, 0.6, scale=DEGREES_PER_RADIAN, start=0.4)
+    level, line, values = checks.status(no_cells())
+    said = 'joint position looks like degrees: its rate is 57.3 x the velocity'
+    assert (level, line) == (assessment.WARN, said)
+    assert math.isclose(values['joint position rate / velocity'], 180.0 / math.pi,
+                        rel_tol=1e-12)
+    assert values['joint position wraps at'] == 'no wrap seen'
+    assert values['input mistakes'] == said
+    assert checks.news() == [('warning', f'input mistake? {said}')]
+    checks.status(no_cells())
+    assert checks.news() == []                        # said once
+    checks.restart()
+    turn(checks, 1.0, start=10.0)
+    level, line, values = checks.status(no_cells())
+    assert (level, line) == (assessment.OK,
+                             'inputs agree: joint position and velocity (rad, rad/s)')
+    assert math.isclose(values['joint position rate / velocity'], 1.0, rel_tol=1e-9)
+    assert values['input mistakes'] == ''
+    assert checks.news() == [('info', 'inputs agree again')]
+    assert checks.news() == []
+
+
+def test_the_window_forgets_the_oldest_samples():
+    """WINDOW (2000) samples in radians after 1000 in degrees: the degrees are out of it."""
+    checks = InputChecks()
+    turn(checks, 1.0, scale=DEGREES_PER_RADIAN)
+    assert checks.status(no_cells())[0] == assessment.WARN
+    checks.restart()
+    turn(checks, 0.5, scale=DEGREES_PER_RADIAN, start=20.0)
+    turn(checks, WINDOW / RATE, start=20.5)
+    level, line, values = checks.status(no_cells())
+    assert level == assessment.OK, line
+    assert math.isclose(values['joint position rate / velocity'], 1.0, rel_tol=1e-9)
+
+
+def test_cells_against_their_shares():
+    """
+    Cells reading their shares agree; the rear's sign reversed is named, figures by hand.
+
+    Values per cell: its static load and its share (N, magnitudes). A cell without readings
+    is not judged.
+    """
+    checks = InputChecks()
+    turn(checks, 1.0)
+    level, line, values = checks.status(cells([complex(0, -3000.0), complex(0, -1000.0)]))
+    assert (level, line) == (assessment.OK, "inputs agree: joint position and velocity "
+                             "(rad, rad/s) and the cells and their supports' shares")
+    assert {k: v for k, v in values.items() if k.startswith('cell')} == {
+        'cell front static load [N]': 3000.0, 'cell front share of the weight [N]': 3000.0,
+        'cell rear static load [N]': 1000.0, 'cell rear share of the weight [N]': 1000.0}
+    level, line, values = checks.status(cells([complex(0, -3000.0), complex(0, 1000.0)]))
+    said = ("cell rear reads its support's static load with the sign reversed (1000 N where "
+            'its support carries 1000 N)')
+    assert (level, line, values['input mistakes']) == (assessment.WARN, said, said)
+    assert checks.news() == [('warning', f'input mistake? {said}')]
+    level, line, values = checks.status(cells([complex(0, -3000.0), complex(0, 1000.0)],
+                                              read=('front',)))
+    assert level == assessment.OK and 'cell rear static load [N]' not in values
+    checks = InputChecks()
+    level, line, _ = checks.status(cells([complex(0, -3000.0), complex(0, -1000.0)]))
+    assert line == "inputs agree: the cells and their supports' shares"
+    unfit = cells([0j, 0j])
+    unfit.cells.found[0].identifiable = False
+    assert checks.status(unfit)[1] == \
+        'inputs: nothing to check yet (no turn, no fit of the cells)'
