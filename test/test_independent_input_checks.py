@@ -127,3 +127,18 @@ def test_cells_against_their_shares():
     unfit.cells.found[0].identifiable = False
     assert checks.status(unfit)[1] == \
         'inputs: nothing to check yet (no turn, no fit of the cells)'
+
+
+def test_a_motion_and_a_cell_mistake_are_both_said():
+    """Degrees and a reversed cell: both, in one line ('; '), the values' ' | ', two log lines."""
+    checks = InputChecks()
+    assert checks.news() == []                 # before any status: nothing to say
+    turn(checks, 1.0, scale=DEGREES_PER_RADIAN)
+    level, line, values = checks.status(cells([complex(0, -3000.0), complex(0, 1000.0)]))
+    motion = 'joint position looks like degrees: its rate is 57.3 x the velocity'
+    cell = ("cell rear reads its support's static load with the sign reversed (1000 N where "
+            'its support carries 1000 N)')
+    assert (level, line) == (assessment.WARN, f'{motion}; {cell}')
+    assert values['input mistakes'] == f'{motion} | {cell}'
+    assert checks.news() == [('warning', f'input mistake? {motion}'),
+                             ('warning', f'input mistake? {cell}')]
