@@ -242,8 +242,8 @@ def hand_bag(chunk_records):
 FLOAT64 = 'std_msgs/msg/Float64'
 MAGIC = b'\x89MCAP0\r\n'
 # Log times: a run of 12 equal records (one of them out of order, one tie), an empty
-# message (22 bytes: the shortest message record) on the run's stride, a Float64 cut to
-# 8 bytes of data, and three more.
+# message (22 bytes: the shortest message record) on the run's stride, Float64s cut to
+# 8 and to 11 bytes of data (12 whole), and three more.
 SPEEDS = [(100 + 10 * k, 0.5 * k) for k in range(12)] + [(130, 99.0)]
 SPEEDS[5] = (40, -2.5)
 TAIL = [(200, 1.25), (150, -7.0), (200, 3.5)]
@@ -253,6 +253,7 @@ def speed_records():
     out = [message(1, k, log, float64(w)) for k, (log, w) in enumerate(SPEEDS)]
     out.append(message(1, 20, 170, b''))
     out.append(message(1, 21, 175, float64(8.0)[:8]))
+    out.append(message(1, 22, 176, float64(9.0)[:11]))      # one byte short of whole
     out += [message(1, 30 + k, log, float64(w)) for k, (log, w) in enumerate(TAIL)]
     return out
 
@@ -263,7 +264,7 @@ def test_a_chunk_without_message_indexes_is_walked_record_by_record(tmp_path):
 
     Each message's log time and bytes as the ``mcap`` library's stream reader gives them
     (the empty one too); the speeds of the whole Float64 messages (12 bytes of data or
-    more: not the empty one, not the one cut to 8 bytes) by hand, sorted by log time, ties
+    more: not the empty one, not those cut to 8 and 11 bytes) by hand, sorted by log time, ties
     in file order.
     """
     from mcap.records import Message
@@ -273,7 +274,7 @@ def test_a_chunk_without_message_indexes_is_walked_record_by_record(tmp_path):
     path.write_bytes(data)
     theirs = [(r.log_time, bytes(r.data)) for r in StreamReader(io.BytesIO(data)).records
               if isinstance(r, Message)]
-    assert len(theirs) == 18
+    assert len(theirs) == 19
     bag = Bag(path)
     assert bag.problems == []
     channel = bag.channel('/speed', FLOAT64)
@@ -317,7 +318,7 @@ def test_a_record_too_short_for_a_message_is_not_taken_for_one(tmp_path):
     (tmp_path / 'bogus.mcap').write_bytes(data)
     bag = Bag(tmp_path / 'bogus.mcap')
     assert bag.messages(bag.channel('/speed', FLOAT64)) == expected
-    assert len(expected) == 18
+    assert len(expected) == 19
 
 
 def test_a_record_running_past_its_chunks_end_is_said_and_the_rest_read(tmp_path):
@@ -336,7 +337,7 @@ def test_a_record_running_past_its_chunks_end_is_said_and_the_rest_read(tmp_path
     bag = Bag(path)
     channel = bag.channel('/speed', FLOAT64)
     assert [log for log, _ in bag.messages(channel)] == \
-        [log for log, _ in SPEEDS] + [170, 175] + [log for log, _ in TAIL[:-1]]
+        [log for log, _ in SPEEDS] + [170, 175, 176] + [log for log, _ in TAIL[:-1]]
     stop = definitions + sum(len(r) for r in records[:-1])
     size = stop + len(last)
     assert bag.problems == [f"chunk at byte {chunk_at}: a record runs past the chunk's end "
@@ -357,7 +358,7 @@ def test_a_damaged_channel_record_in_a_chunk_costs_only_itself(tmp_path):
     path.write_bytes(data)
     bag = Bag(path)
     channel = bag.channel('/speed', FLOAT64)
-    assert len(bag.messages(channel)) == 18
+    assert len(bag.messages(channel)) == 19
     assert bag.topics() == {'/speed': FLOAT64}
     assert bag.problems == [f'chunk at byte {chunk_at}: corrupt record (opcode 0x4) at '
                             f'{definitions}: string beyond the record; skipped']
