@@ -374,3 +374,28 @@ def test_a_topic_of_the_wrong_type_names_every_topic_of_the_bag():
     assert str(refused.value) == (
         f'x.mcap: topic /speed has type {FLOAT64}, expected {STRING}; the bag has: '
         f'/joint_states ({JOINT}), /layout (no schema), /speed ({FLOAT64})')
+
+
+def test_a_run_of_equal_records_is_counted_to_its_last_one():
+    """
+    ``_run``: how many records from a position share the first's opcode and length.
+
+    1000 equal messages (30-byte records: many of ``_run``'s growing blocks), then one of
+    another length, or another opcode of the same length, at each of several places: the
+    count is that place, by construction; the records' table lists every record.
+    """
+    from cvc_balance.bag.mcap_reader import _run, record_table
+    same = message(1, 0, 7, b'\x00' * 8)
+    step = len(same)
+    for at in (2, 3, 17, 18, 83, 500, 999):
+        for other in (message(1, 0, 7, b'\x00' * 9), record(0x07, b'\x00' * (step - 9))):
+            buffer = np.frombuffer(same * at + other + same * (1000 - at), np.uint8)
+            assert _run(buffer, 0, step, 0x05, step - 9) == at
+            offsets, opcodes, lengths, end = record_table(buffer)
+            expected = [step * k for k in range(at + 1)] + \
+                [step * (at + 1) + len(other) - step + step * k for k in range(1000 - at)]
+            assert offsets.tolist() == expected and end == len(buffer)
+            assert opcodes.tolist() == [5] * at + [other[0]] + [5] * (1000 - at)
+    buffer = np.frombuffer(same * 1000, np.uint8)
+    assert _run(buffer, 0, step, 0x05, step - 9) == 1000
+    assert _run(buffer, step * 990, step, 0x05, step - 9) == 10
