@@ -399,3 +399,25 @@ def test_a_run_of_equal_records_is_counted_to_its_last_one():
     buffer = np.frombuffer(same * 1000, np.uint8)
     assert _run(buffer, 0, step, 0x05, step - 9) == 1000
     assert _run(buffer, step * 990, step, 0x05, step - 9) == 10
+
+
+def test_the_records_table_of_edge_buffers():
+    """
+    ``record_table`` at its edges: no records, a torn header, a last record of 9 bytes.
+
+    The table of an empty buffer (an empty chunk) is three empty arrays of int64, uint8,
+    int64 and ``end`` 0; of 5 bytes (less than a record's header), the same; a record of
+    no body (9 bytes, opcode and length 0) ending the buffer exactly is listed, and
+    ``end`` is the buffer's length.
+    """
+    from cvc_balance.bag.mcap_reader import record_table
+    for data in (b'', b'\x05\x00\x00\x00\x00'):
+        offsets, opcodes, lengths, end = record_table(np.frombuffer(data, np.uint8))
+        assert [(a.shape, a.dtype) for a in (offsets, opcodes, lengths)] == \
+            [((0,), np.int64), ((0,), np.uint8), ((0,), np.int64)] and end == 0
+    same = message(1, 0, 7, b'\x00' * 8)
+    for tail in (record(0x07, b''), record(0x07, b'') * 2, same + record(0x07, b'')):
+        data = same * 3 + tail
+        offsets, opcodes, lengths, end = record_table(np.frombuffer(data, np.uint8))
+        assert end == len(data)
+        assert offsets[-1] == len(data) - 9 and opcodes[-1] == 7 and lengths[-1] == 0
