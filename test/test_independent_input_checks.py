@@ -142,3 +142,65 @@ def test_a_motion_and_a_cell_mistake_are_both_said():
     assert values['input mistakes'] == f'{motion} | {cell}'
     assert checks.news() == [('warning', f'input mistake? {motion}'),
                              ('warning', f'input mistake? {cell}')]
+
+
+# -- identify/mistakes: the findings' figures, and a run's windows -------------------------
+
+def test_each_cell_findings_cause_line_and_figure_by_hand():
+    """
+    A cell's scale, axes and static load off: each line and figure by hand.
+
+    Shares 3000 N (front) and 1000 N (rear), straight down; the front cell reads its share
+    halved (scale: figure 0.5), turned by 90 deg (axes: figure 90), halved and turned
+    (static load: figure 0.5).
+    """
+    from cvc_balance.identify.mistakes import cell_mistakes, Finding
+    shares = {'front': complex(0, -3000.0), 'rear': complex(0, -1000.0)}
+    cases = {
+        complex(0, -1500.0): Finding('scale', "cell front's scale looks off: it reads 0.5 x "
+                                     "its support's static load (1500 N where its support "
+                                     'carries 3000 N)', 0.5),
+        complex(3000.0, 0): Finding('axes', "cell front's axes look turned by 90 deg: its "
+                                    "static load points elsewhere than its support's (3000 N "
+                                    'where its support carries 3000 N)', 90.0),
+        complex(1500.0, 0): Finding('static load', "cell front reads 0.5 x its support's "
+                                    'static load, turned by 90 deg (1500 N where its support '
+                                    'carries 3000 N)', 0.5)}
+    for got, finding in cases.items():
+        assert cell_mistakes(shares, {'front': got, 'rear': shares['rear']}) == [finding]
+
+
+def steady(seconds, omega=5.0, rate=1000.0, start=0.0):
+    t = start + np.arange(int(seconds * rate)) / rate
+    return t, omega * t, np.full(len(t), omega)
+
+
+def test_a_position_wrapping_at_360_with_degrees_per_second_has_its_ratio_as_figure():
+    """Both in degrees (wrapping at 360): 'wraps at 360', its figure the ratio (1)."""
+    from cvc_balance.identify.mistakes import motion_units
+    t, q, w = steady(2.0)
+    check = motion_units(t, np.degrees(q) % 360.0, np.degrees(w))
+    assert check.period == 360.0 and math.isclose(check.ratio, 1.0, rel_tol=1e-9)
+    assert (check.finding.cause, check.finding.figure) == ('wraps at 360', check.ratio)
+
+
+def test_a_runs_windows_spread_from_its_start_to_its_end():
+    """
+    ``run_motion_findings``: up to 16 windows of 2000 samples from the first to the last.
+
+    3000 samples in degrees: 16 windows (starts 0 to 1000), each finding it; 500 samples
+    (less than a window): one; 3000 at rest then 3000 turning: the windows at rest cannot
+    tell and are passed over, the later ones find it (told = found, fewer than 16).
+    """
+    from cvc_balance.identify.mistakes import run_motion_findings
+    t, q, w = steady(3.0)
+    (found, count, told), = run_motion_findings(t, np.degrees(q), w)
+    assert (found.cause, count, told) == ('degrees', 16, 16)
+    (found, count, told), = run_motion_findings(t[:500], np.degrees(q[:500]), w[:500])
+    assert (found.cause, count, told) == ('degrees', 1, 1)
+    t2, q2, w2 = steady(3.0, start=3.0)
+    time = np.concatenate([t, t2])
+    angle = np.degrees(np.concatenate([np.zeros(3000), q2 - q2[0]]))
+    omega = np.concatenate([np.zeros(3000), w2])
+    (found, count, told), = run_motion_findings(time, angle, omega)
+    assert found.cause == 'degrees' and 0 < count == told < 16
