@@ -421,3 +421,90 @@ def test_the_records_table_of_edge_buffers():
         offsets, opcodes, lengths, end = record_table(np.frombuffer(data, np.uint8))
         assert end == len(data)
         assert offsets[-1] == len(data) - 9 and opcodes[-1] == 7 and lengths[-1] == 0
+
+
+# -- a damaged record in a recording without a summary: the walk goes on by itself --------
+
+def top_level(data):
+    """[(offset, opcode, length)] of a file's top-level records, walked by hand."""
+    position, found = 8, []
+    while position + 9 <= len(data):
+        opcode, length = struct.unpack_from('<BQ', data, position)
+        if position + 9 + length > len(data):
+            break
+        found.append((position, opcode, length))
+        position += 9 + length
+    return found
+
+
+def stream_messages(data, topic='/joint_states'):
+    """(log time, bytes) of ``topic``'s messages the mcap library's stream reader reads."""
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    out, topics = [], {}
+    try:
+        for r in StreamReader(io.BytesIO(data)).records:
+            if isinstance(r, Channel):
+                topics[r.id] = r.topic
+            elif isinstance(r, Message) and topics[r.channel_id] == topic:
+                out.append((r.log_time, bytes(r.data)))
+    except Exception as error:                  # the end of a cut file
+        assert type(error).__name__ == 'EndOfFile', error
+    return out
+
+
+@pytest.fixture(scope='module')
+def cut_recording(tmp_path_factory):
+    """A recording killed after its fifth chunk (no summary): bytes and top-level records."""
+    import yaml
+    from independent import ramp, write_input_bag
+    from test_survivors import GANTRY
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=3.0)
+    path = write_input_bag(tmp_path_factory.mktemp('cut') / 'whole.mcap', stamps, angle,
+                           omega, [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    data = path.read_bytes()
+    chunks = [(o, n) for o, op, n in top_level(data) if op == 0x06]
+    data = data[:chunks[4][0] + 9 + chunks[4][1]]
+    return data, top_level(data)
+
+
+@pytest.mark.parametrize('damage, number', [('length', 1), ('length and data', 1),
+                                            ('length and data', 3), ('a false record', 1)])
+def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_path):
+    """
+    A chunk's length field says 1 MiB more than the file holds (and its data is damaged).
+
+    Without a summary no chunk index says where chunks are: the walk goes on by itself.
+    With its data whole the chunk's own fields (its CRC holds) give its length: every
+    message is read, as the mcap library reads the undamaged file. With a byte of its
+    data flipped too, the walk goes on at the next chunk: every message but that chunk's,
+    as the mcap library reads the file without it; the line says how many bytes were
+    skipped to which byte (by hand from the top-level records). Chunk 3: the next whole
+    record is the last, ending at the file's end. A false record: the damage looks like a
+    Channel record's opcode and a length that fits the file (10), its fields not.
+    """
+    data, records = cut_recording
+    chunks = [(o, n) for o, op, n in records if op == 0x06]
+    (at, length), (following, _) = chunks[number], chunks[number + 1]
+    damaged = bytearray(data)
+    struct.pack_into('<Q', damaged, at + 1, length + (1 << 20))
+    if damage == 'length':
+        expected = stream_messages(data)
+        said = (f'record (opcode 0x06) at byte {at} runs past the end of the file: its '
+                f'length field ({length + (1 << 20)}) is damaged, its fields give {length}: '
+                'read by them')
+    else:
+        if damage == 'a false record':
+            struct.pack_into('<BQ', damaged, at + 9 + length // 2, 0x04, 10)
+        else:
+            damaged[at + 9 + length // 2] ^= 0xFF
+        expected = stream_messages(data[:at] + data[following:])
+        said = (f'record (opcode 0x06) at byte {at} runs past the end of the file: '
+                f'{following - at} bytes skipped to the next whole record at byte {following}')
+    assert following + 9 + chunks[number + 1][1] == len(data) or number < 3
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(damaged))
+    bag = Bag(path)
+    ours = bag.messages(bag.channel('/joint_states', JOINT))
+    assert len(ours) > 100 and ours == expected
+    assert bag.problems == [said]
