@@ -204,3 +204,46 @@ def test_a_runs_windows_spread_from_its_start_to_its_end():
     omega = np.concatenate([np.zeros(3000), w2])
     (found, count, told), = run_motion_findings(time, angle, omega)
     assert found.cause == 'degrees' and 0 < count == told < 16
+
+
+def test_what_a_position_wraps_at_by_hand():
+    """
+    ``wrap_period`` of step sequences worked by hand.
+
+    A wrap alone between ordinary steps: its length from the steps beside it (counts:
+    -3796 beside 300 is 4096; -3096 beside 1000 steps of 1000, 4096; radians: -6.1 beside
+    0.1 is 6.2, 2 pi within 10 %), in the middle or one before the end. A position
+    wrapping back and forth (4095 -> 1 -> 4095): no wrap alone, the wraps' median plus
+    the typical step, 4194 (not within 1 % of 4096). A step of 1.2 rad among 0.1: no
+    wrap (not over pi / 2). Two steps: too few to tell.
+    """
+    from cvc_balance.identify.mistakes import wrap_period
+    middle = [100] * 10 + [300, -3796, 300] + [100] * 10
+    assert wrap_period(middle) == 4096.0
+    assert wrap_period(middle[:13]) == 4096.0                    # one before the end
+    assert wrap_period([1000] * 5 + [-3096] + [1000] * 5) == 4096.0
+    assert wrap_period([0.1, -6.1, 0.1]) == 2 * math.pi
+    assert wrap_period([100] * 10 + [-4094, 4094] + [100] * 10) == 4194.0
+    assert wrap_period([0.1] * 5 + [1.2] + [0.1] * 5) is None
+    assert wrap_period([0.1, 6.0]) is None
+
+
+def test_each_motion_findings_figure_is_its_ratio():
+    """
+    Each finding's figure is the ratio measured; a position in encoder counts is named.
+
+    Steady turns at 5 rad/s: the velocity reversed (-1), in deg/s (1 / 57.3), the position
+    in degrees and the velocity in rpm (57.3 / 9.55 = 6), the motor side of a 3:1 gear (3),
+    and position and velocity in counts of 256 a turn (1, wrapping at 256).
+    """
+    from cvc_balance.identify.mistakes import motion_units
+    t, q, w = steady(2.0)
+    counts = 256 / (2 * math.pi)
+    cases = {'reversed': (q, -w), 'deg/s': (q, np.degrees(w)),
+             'degrees and rpm': (np.degrees(q), w * 30 / math.pi), 'ratio': (3 * q, w),
+             'wraps': ((q * counts) % 256, w * counts)}
+    for cause, (position, velocity) in cases.items():
+        check = motion_units(t, position, velocity)
+        assert (check.finding.cause, check.finding.figure) == (cause, check.ratio)
+    assert check.finding.message == 'joint position wraps at 256, not 2 pi: it is not radians'
+    assert math.isclose(check.ratio, 1.0, rel_tol=1e-9) and check.period == 256.0
