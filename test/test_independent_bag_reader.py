@@ -479,7 +479,8 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     message is read, as the mcap library reads the undamaged file. With a byte of its
     data flipped too, the walk goes on at the next chunk: every message but that chunk's,
     as the mcap library reads the file without it; the line says how many bytes were
-    skipped to which byte (by hand from the top-level records). Chunk 3: the next whole
+    skipped to which byte (by hand from the top-level records), and the next that the
+    recording is cut (it was not said when another problem was). Chunk 3: the next whole
     record is the last, ending at the file's end. A false record: the damage looks like a
     Channel record's opcode and a length that fits the file (10), its fields not.
     """
@@ -507,4 +508,4 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     bag = Bag(path)
     ours = bag.messages(bag.channel('/joint_states', JOINT))
     assert len(ours) > 100 and ours == expected
-    assert bag.problems == [said]
+    assert bag.problems == [said, 'file has no end of data (truncated recording?)']
