@@ -13,6 +13,7 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from cvc_balance.identify.mistakes import DEGREES_PER_RADIAN
 from cvc_balance.physics import assessment
@@ -247,3 +248,51 @@ def test_each_motion_findings_figure_is_its_ratio():
         assert (check.finding.cause, check.finding.figure) == (cause, check.ratio)
     assert check.finding.message == 'joint position wraps at 256, not 2 pi: it is not radians'
     assert math.isclose(check.ratio, 1.0, rel_tol=1e-9) and check.period == 256.0
+
+
+def test_a_wrap_beside_unequal_steps_is_measured_from_their_mean():
+    """Steps 100 and 500 beside a wrap of -3796 (typical 200): their mean 300, so 4096."""
+    from cvc_balance.identify.mistakes import wrap_period
+    assert wrap_period([200] * 10 + [100, -3796, 500] + [200] * 10) == 4096.0
+
+
+def test_motion_units_at_its_edges_by_hand():
+    """
+    ``motion_units`` where its limits fall, each case by hand.
+
+    21 samples (20 steps of 0.06 rad, 1.2 rad turned): judged, ratio 1. Steps of 0.75 rad
+    (under 2 pi / 8, no wrap seen): judged; of 0.9 rad: too sparse, None. Degrees wrapping
+    at 360 where the only wrap falls over a gap of exactly 5 sample spacings: the wrap is
+    seen ('wraps at 360'); over a gap of 6: not seen (a pause), degrees and deg/s agree.
+    A slip of 2 rad over a pause (not a wrap seen): left out, the ratio 1; of 1.2 rad
+    (under pi / 2): kept, the ratio 1 + 1.2 / turned.
+    """
+    from cvc_balance.identify.mistakes import motion_units
+    dt = 1.0 / 1024                                   # exact in binary
+    k = np.arange(21)
+    check = motion_units(k * dt, 0.06 * k, np.full(21, 0.06 / dt))
+    assert check is not None and math.isclose(check.ratio, 1.0, rel_tol=1e-12)
+    k = np.arange(30)
+    assert motion_units(k * dt, 0.75 * k, np.full(30, 0.75 / dt)).ratio == \
+        pytest.approx(1.0, rel=1e-12)
+    assert motion_units(k * dt, 0.9 * k, np.full(30, 0.9 / dt)) is None
+    for gap, cause in ((5, 'wraps at 360'), (6, None)):
+        ticks = np.arange(2000.0)
+        ticks[1000:] += gap - 1                       # one step of ``gap`` spacings
+        t = ticks * dt
+        w = np.full(len(t), 200.0)                    # deg/s
+        q = (200.0 * (t - t[999]) + 359.9) % 360.0     # wraps in the gap only
+        assert np.sum(np.abs(np.diff(q)) > 180) == 1 and np.diff(q)[999] < -180
+        check = motion_units(t, q, w)
+        assert (check.finding.cause if check.finding else None) == cause
+        assert math.isclose(check.ratio, 1.0, rel_tol=1e-9)
+    for slip, ratio in ((2.0, 1.0), (1.2, None)):
+        ticks = np.arange(3000.0)
+        ticks[1500:] += 9                             # a pause of ten spacings
+        t = ticks * dt
+        q = 5.0 * t
+        q[1500:] += slip
+        check = motion_units(t, q, np.full(len(t), 5.0))
+        turned = 5.0 * (t[-1] - t[0])
+        expected = ratio or 1.0 + slip / turned
+        assert math.isclose(check.ratio, expected, rel_tol=1e-9), slip
