@@ -469,7 +469,8 @@ def cut_recording(tmp_path_factory):
 
 
 @pytest.mark.parametrize('damage, number', [('length', 1), ('length and data', 1),
-                                            ('length and data', 3), ('a false record', 1)])
+                                            ('length and data', 3), ('a false record', 1),
+                                            ('header length', 0)])
 def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_path):
     """
     A chunk's length field says 1 MiB more than the file holds (and its data is damaged).
@@ -482,18 +483,22 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     skipped to which byte (by hand from the top-level records), and the next that the
     recording is cut (it was not said when another problem was). Chunk 3: the next whole
     record is the last, ending at the file's end. A false record: the damage looks like a
-    Channel record's opcode and a length that fits the file (10), its fields not.
+    Channel record's opcode and a length that fits the file (10), its fields not. The
+    Header's length field damaged: read by its fields (profile and library).
     """
     data, records = cut_recording
     chunks = [(o, n) for o, op, n in records if op == 0x06]
     (at, length), (following, _) = chunks[number], chunks[number + 1]
     damaged = bytearray(data)
+    if damage == 'header length':        # the Header record (profile, library) at byte 8
+        at, opcode, length = records[0]
+        assert (at, opcode) == (8, 0x01)
     struct.pack_into('<Q', damaged, at + 1, length + (1 << 20))
-    if damage == 'length':
+    if damage in ('length', 'header length'):
         expected = stream_messages(data)
-        said = (f'record (opcode 0x06) at byte {at} runs past the end of the file: its '
-                f'length field ({length + (1 << 20)}) is damaged, its fields give {length}: '
-                'read by them')
+        said = (f'record (opcode 0x{data[at]:02x}) at byte {at} runs past the end of the '
+                f'file: its length field ({length + (1 << 20)}) is damaged, its fields give '
+                f'{length}: read by them')
     else:
         if damage == 'a false record':
             struct.pack_into('<BQ', damaged, at + 9 + length // 2, 0x04, 10)
