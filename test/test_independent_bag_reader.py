@@ -470,7 +470,8 @@ def cut_recording(tmp_path_factory):
 
 @pytest.mark.parametrize('damage, number', [('length', 1), ('length and data', 1),
                                             ('length and data', 3), ('a false record', 1),
-                                            ('header length', 0)])
+                                            ('header length', 0x01), ('schema length', 0x03),
+                                            ('channel length', 0x04)])
 def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_path):
     """
     A chunk's length field says 1 MiB more than the file holds (and its data is damaged).
@@ -484,17 +485,17 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     recording is cut (it was not said when another problem was). Chunk 3: the next whole
     record is the last, ending at the file's end. A false record: the damage looks like a
     Channel record's opcode and a length that fits the file (10), its fields not. The
-    Header's length field damaged: read by its fields (profile and library).
+    length field of the Header, the first Schema or the first Channel damaged: each read
+    by its own fields.
     """
     data, records = cut_recording
     chunks = [(o, n) for o, op, n in records if op == 0x06]
-    (at, length), (following, _) = chunks[number], chunks[number + 1]
+    (at, length), (following, _) = chunks[number % 4], chunks[number % 4 + 1]
     damaged = bytearray(data)
-    if damage == 'header length':        # the Header record (profile, library) at byte 8
-        at, opcode, length = records[0]
-        assert (at, opcode) == (8, 0x01)
+    if damage.endswith(' length'):       # the first Header, Schema or Channel record
+        at, length = next((o, n) for o, op, n in records if op == number)
     struct.pack_into('<Q', damaged, at + 1, length + (1 << 20))
-    if damage in ('length', 'header length'):
+    if damage.endswith('length'):
         expected = stream_messages(data)
         said = (f'record (opcode 0x{data[at]:02x}) at byte {at} runs past the end of the '
                 f'file: its length field ({length + (1 << 20)}) is damaged, its fields give '
@@ -507,7 +508,8 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
         expected = stream_messages(data[:at] + data[following:])
         said = (f'record (opcode 0x06) at byte {at} runs past the end of the file: '
                 f'{following - at} bytes skipped to the next whole record at byte {following}')
-    assert following + 9 + chunks[number + 1][1] == len(data) or number < 3
+    assert number != 3 or damage.endswith('length') or \
+        following + 9 + chunks[number + 1][1] == len(data)
     path = tmp_path / 'damaged.mcap'
     path.write_bytes(bytes(damaged))
     bag = Bag(path)

@@ -296,3 +296,39 @@ def test_motion_units_at_its_edges_by_hand():
         turned = 5.0 * (t[-1] - t[0])
         expected = ratio or 1.0 + slip / turned
         assert math.isclose(check.ratio, expected, rel_tol=1e-9), slip
+
+
+def test_which_cells_are_judged_and_their_tolerance_by_hand():
+    """
+    Shares under 20 % of the radial weight are not judged; none when there is no weight.
+
+    Shares 4000 N and 1000 N (weight 5000 N: 1000 N is exactly 20 %, judged): the rear
+    cell reversed is named. Shares 4500 N and 500 N: the rear (10 %) reversed is not. No
+    radial weight (a vertical axis: shares 0): nothing judged. A light rotor (shares 0.3
+    and 0.2 N): judged as any. Within tolerance: 3000 N read as 3900 N (0.25 x 3000 +
+    0.05 x 4000 = 950 N allowed) agrees. Swapped cells: figure 1000 / 3000 by hand.
+    """
+    from cvc_balance.identify.mistakes import cell_mistakes
+    down = lambda n: complex(0.0, -n)                       # noqa: E731
+    found = cell_mistakes({'front': down(4000), 'rear': down(1000)},
+                          {'front': down(4000), 'rear': down(-1000)})
+    assert [f.cause for f in found] == ['sign']
+    assert cell_mistakes({'front': down(4500), 'rear': down(500)},
+                         {'front': down(4500), 'rear': down(-500)}) == []
+    assert cell_mistakes({'front': 0j, 'rear': 0j}, {'front': down(10), 'rear': down(-10)}) \
+        == []
+    assert [f.cause for f in cell_mistakes({'front': down(0.3), 'rear': down(0.2)},
+                                           {'front': down(0.3), 'rear': down(-0.2)})] == \
+        ['sign']
+    assert cell_mistakes({'front': down(3000), 'rear': down(1000)},
+                         {'front': down(3900), 'rear': down(1000)}) == []
+    (swapped,) = cell_mistakes({'front': down(3000), 'rear': down(1000)},
+                               {'front': down(1000), 'rear': down(3000)})
+    assert swapped.cause == 'swapped' and math.isclose(swapped.figure, 1000 / 3000)
+
+
+def test_the_turn_judged_is_the_velocitys_by_hand():
+    """``turned``: the velocity's trapezoids over the steps judged, 5 rad/s x 1.999 s."""
+    from cvc_balance.identify.mistakes import motion_units
+    t, q, w = steady(2.0)
+    assert math.isclose(motion_units(t, q, w).turned, 5.0 * 1.999, rel_tol=1e-12)
