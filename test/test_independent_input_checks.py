@@ -306,7 +306,8 @@ def test_which_cells_are_judged_and_their_tolerance_by_hand():
     cell reversed is named. Shares 4500 N and 500 N: the rear (10 %) reversed is not. No
     radial weight (a vertical axis: shares 0): nothing judged. A light rotor (shares 0.3
     and 0.2 N): judged as any. Within tolerance: 3000 N read as 3900 N (0.25 x 3000 +
-    0.05 x 4000 = 950 N allowed) agrees. Swapped cells: figure 1000 / 3000 by hand.
+    0.05 x 4000 = 950 N allowed) agrees. Swapped cells, and the front cell on the rear
+    support: figure 1000 / 3000 by hand.
     """
     from cvc_balance.identify.mistakes import cell_mistakes
     down = lambda n: complex(0.0, -n)                       # noqa: E731
@@ -325,6 +326,9 @@ def test_which_cells_are_judged_and_their_tolerance_by_hand():
     (swapped,) = cell_mistakes({'front': down(3000), 'rear': down(1000)},
                                {'front': down(1000), 'rear': down(3000)})
     assert swapped.cause == 'swapped' and math.isclose(swapped.figure, 1000 / 3000)
+    (elsewhere,) = cell_mistakes({'front': down(3000), 'rear': down(1000)},
+                                 {'front': down(1000), 'rear': down(1000)})
+    assert elsewhere.cause == 'wrong support' and math.isclose(elsewhere.figure, 1000 / 3000)
 
 
 def test_the_turn_judged_is_the_velocitys_by_hand():
