@@ -124,3 +124,30 @@ def test_the_peak_support_loads_of_a_light_rotor_are_pinocchios(tmp_path):
     assert set(segment.peak_support) == set(peaks) and 0.0 < max(peaks.values()) < 1.0
     for name, peak in peaks.items():
         assert segment.peak_support[name] == pytest.approx(peak, rel=1e-9), name
+
+
+def test_rejected_layout_messages_are_said_one_by_one_up_to_five(tmp_path, monkeypatch):
+    """
+    Five rejected: five lines and no count; a parser's own failure is said as internal.
+
+    A layout text that makes the parser itself fail (put in by hand) is said with its
+    exception's type and text, and the previous layout stays in force.
+    """
+    import importlib
+    module = importlib.import_module('cvc_balance.bag.replay')
+    parse = module.layout_from_text
+
+    def failing(text, **kwargs):
+        if text == 'boom':
+            raise RuntimeError('the parser failed')
+        return parse(text, **kwargs)
+    monkeypatch.setattr(module, 'layout_from_text', failing)
+    good = yaml.safe_dump(GANTRY)
+    messages = [(10**9, good)] + [(k * 10**9, 'components: [') for k in range(2, 6)] + \
+        [(6 * 10**9, 'boom')]
+    events, problems = module.layouts_in_force(None, messages)
+    assert len(events) == 1 and len(problems) == 5
+    assert problems[4] == ('layout at 6.000 s rejected (previous stays in force): internal '
+                           'error: RuntimeError: the parser failed')
+    assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
+               for k, p in zip(range(2, 6), problems))
