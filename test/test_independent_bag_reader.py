@@ -73,7 +73,7 @@ def read_with_mcap_library(path, topic, msg_type):
 
 
 def wrench_messages():
-    """A run of equal records (one frame), then frames of other lengths, odd stamps."""
+    """Return a run of equal records (one frame), then frames of other lengths, odd stamps."""
     rng = np.random.default_rng(29)
     out = []
     for k in range(60):                      # equal lengths: read through strided views
@@ -225,7 +225,7 @@ def float64(value):
 
 
 def hand_bag(chunk_records):
-    """An MCAP file by hand: header, one uncompressed chunk (CRC 0: not checked), no index."""
+    """Return an MCAP file by hand: a header, one uncompressed chunk (CRC 0), no index."""
     definitions = record(0x03, struct.pack('<H', 1) + text(FLOAT64) + text('ros2msg') +
                          text('')) + \
         record(0x04, struct.pack('<HH', 1, 1) + text('/speed') + text('cdr') +
@@ -455,7 +455,7 @@ def stream_messages(data, topic='/joint_states'):
 
 @pytest.fixture(scope='module')
 def cut_recording(tmp_path_factory):
-    """A recording killed after its fifth chunk (no summary): bytes and top-level records."""
+    """Return a recording killed after its fifth chunk (no summary) and its records."""
     import yaml
     from independent import ramp, write_input_bag
     from test_survivors import GANTRY

@@ -33,7 +33,7 @@ def no_cells():
 
 
 def cells(biases, read=('front', 'rear')):
-    """A layout in force whose cells were fitted with these static loads (complex N)."""
+    """Return a layout in force whose cells were fitted with these static loads (N)."""
     shares = {'front': complex(0.0, -3000.0), 'rear': complex(0.0, -1000.0)}
     model = SimpleNamespace(supports=[SimpleNamespace(name='front'),
                                       SimpleNamespace(name='rear')])
