@@ -110,6 +110,9 @@ MODULES = {
     'field_model_check': ('cvc_balance/field/model_check.py',
                           ['test/test_field_mistakes.py', 'test/test_field_procedure.py']),
     'field_search': ('cvc_balance/field/search.py', ['test/test_field_plans.py']),
+    # The node's pure parts: in this process (the node itself runs in another).
+    'ros_input_checks': ('cvc_balance/ros/input_checks.py',
+                         ['test/test_independent_input_checks.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
                     'simulate', 'charts')},
@@ -149,7 +152,7 @@ def toml_list(values):
     return '[' + ', '.join(json.dumps(str(v)) for v in values) + ']'
 
 
-def prepare(work, module, tests):
+def prepare(work, module, tests, deselected=()):
     """Copy the tree (tracked and new files) to ``work``, with mutmut's settings for a module."""
     if work.exists():
         shutil.rmtree(work)
@@ -164,7 +167,7 @@ def prepare(work, module, tests):
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, target)
     present = [t for t in tests if (work / t).exists()]
-    deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION)
+    deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION) + list(deselected)
     args = ['-p', 'no:cacheprovider', '-q'] + [f'--deselect={d}' for d in deselect]
     (work / 'pyproject.toml').write_text(
         '[tool.mutmut]\n'
@@ -180,10 +183,10 @@ def prepare(work, module, tests):
     return present
 
 
-def run_module(name, work, children):
+def run_module(name, work, children, tests=None, deselected=()):
     """Run mutmut on one module; return its counts and the survivors' diffs."""
-    module, tests = MODULES[name]
-    present = prepare(work, module, tests)
+    module, guarding = MODULES[name]
+    present = prepare(work, module, tests or guarding, deselected)
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE='1', RERUN_TELEMETRY_ENABLED='false')
     started = time.monotonic()
     log = open(work / 'mutmut.log', 'w')
@@ -208,7 +211,8 @@ def run_module(name, work, children):
     with open(work / 'survivors.txt', 'w') as stream:
         for mutant, status, diff in survivors:
             stream.write(f'## {mutant}: {status}\n{diff}\n')
-    return {'module': module, 'tests': present, 'seconds': round(seconds, 1), **stats}
+    return {'module': module, 'tests': present, 'deselected': list(deselected),
+            'seconds': round(seconds, 1), **stats}
 
 
 def main():
@@ -219,6 +223,12 @@ def main():
     parser.add_argument('--work', type=Path, default=Path('/tmp/cvc_balance_mutation'),
                         help='where the copies go (default %(default)s)')
     parser.add_argument('--children', type=int, default=2, help='mutants tested at once')
+    parser.add_argument('--tests', nargs='+', metavar='FILE',
+                        help="test files to run instead of the module's own (MODULES): a "
+                             'narrower, faster selection, given in docs/mutation.md with its '
+                             'results')
+    parser.add_argument('--deselect', nargs='+', default=[], metavar='TEST',
+                        help='tests (pytest node ids) left out besides DESELECT')
     args = parser.parse_args()
     unknown = [m for m in args.modules if m not in MODULES]
     if unknown:
@@ -227,7 +237,7 @@ def main():
     summary_path = args.work / 'summary.json'
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     for name in args.modules or list(MODULES):
-        row = run_module(name, args.work / name, args.children)
+        row = run_module(name, args.work / name, args.children, args.tests, args.deselect)
         summary[name] = row
         args.work.mkdir(parents=True, exist_ok=True)
         summary_path.write_text(json.dumps(summary, indent=1))

@@ -128,7 +128,7 @@ def select_channel(channels, topic, msg_type, where, option=None, exact=False):
 
 def describe_topics(channels):
     """Return 'topic (type), ...' of ``channels``, sorted, or 'none'."""
-    found = sorted({(c.topic, c.msg_type or '(no schema)') for c in channels})
+    found = sorted({(c.topic, c.msg_type or 'no schema') for c in channels})
     return ', '.join(f'{t} ({m})' for t, m in found) or 'none'
 
 
@@ -178,6 +178,7 @@ class Bag:
         position, size = 8, len(data)
         data_end = False
         indexing = None   # the chunk that message index records now follow
+        stopped = False   # the walk stopped at a record, and said so
         while position < size:
             torn, opcode, length = self._framing(position)
             damage = None
@@ -198,6 +199,7 @@ class Bag:
                         self._ended(data_end, torn)
                     else:
                         self.problems.append(f'{damage}; stopped reading there')
+                    stopped = True
                     break
                 if indexing is not None:      # its message indexes may be part gone: walked
                     indexing.indexes, indexing.walked = None, False
@@ -218,7 +220,7 @@ class Bag:
                 self.finished = True
                 break
             data_end = data_end or opcode == OP_DATA_END
-        if not self.finished and not data_end and not self.problems:
+        if not self.finished and not data_end and not stopped:
             self.problems.append('file has no end of data (truncated recording?)')
 
     def _framing(self, position):

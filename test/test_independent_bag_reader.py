@@ -1,0 +1,518 @@
+"""
+The bag reader's field gathering against a second reader (issue 29's mutation run).
+
+Bags written by the ``mcap`` library's own writer, their messages serialised by rosbags;
+what :mod:`cvc_balance.bag.mcap_reader` gathers with numpy (strided views for runs of
+equal records, byte gathering for the others) is compared, value for value, with rosbags'
+deserialisation of every message the ``mcap`` library's reader returns.
+"""
+
+import io
+import struct
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
+
+from cvc_balance.bag.mcap_reader import (Bag, float64_samples, joint_samples, string_samples,
+                                         wrench_samples)
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+WRENCH, JOINT, STRING = ('geometry_msgs/msg/WrenchStamped', 'sensor_msgs/msg/JointState',
+                         'std_msgs/msg/String')
+
+
+def header(sec, nanosec, frame):
+    types = TYPESTORE.types
+    return types['std_msgs/msg/Header'](
+        stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame)
+
+
+def wrench(sec, nanosec, frame, values):
+    types = TYPESTORE.types
+    vector = types['geometry_msgs/msg/Vector3']
+    msg = types[WRENCH](header=header(sec, nanosec, frame), wrench=types[
+        'geometry_msgs/msg/Wrench'](force=vector(*values[:3]), torque=vector(*values[3:])))
+    return TYPESTORE.serialize_cdr(msg, WRENCH).tobytes()
+
+
+def joint_state(sec, nanosec, frame, names, position, velocity):
+    msg = TYPESTORE.types[JOINT](header=header(sec, nanosec, frame), name=list(names),
+                                 position=np.array(position, float),
+                                 velocity=np.array(velocity, float),
+                                 effort=np.zeros(0))
+    return TYPESTORE.serialize_cdr(msg, JOINT).tobytes()
+
+
+def write_with_mcap_library(path, topics, messages, chunk_size=1024,
+                            compression=CompressionType.LZ4, chunking=True):
+    """Write ``messages`` [(topic, log time ns, bytes)] with the mcap library; return path."""
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=chunk_size, compression=compression,
+                        use_chunking=chunking)
+        writer.start(profile='ros2', library='mcap python')
+        ids = {}
+        for topic, msg_type in topics.items():
+            schema = writer.register_schema(name=msg_type, encoding='ros2msg', data=b'')
+            ids[topic] = writer.register_channel(topic=topic, message_encoding='cdr',
+                                                 schema_id=schema)
+        for n, (topic, log_time, data) in enumerate(messages):
+            writer.add_message(ids[topic], log_time=log_time, data=data,
+                               publish_time=log_time, sequence=n)
+        writer.finish()
+    return path
+
+
+def read_with_mcap_library(path, topic, msg_type):
+    """[(log time, message)] of ``topic`` by the mcap library, deserialised by rosbags."""
+    with open(path, 'rb') as stream:
+        return [(m.log_time, TYPESTORE.deserialize_cdr(m.data, msg_type))
+                for _, c, m in make_reader(stream).iter_messages(topics=[topic])]
+
+
+def wrench_messages():
+    """Return a run of equal records (one frame), then frames of other lengths, odd stamps."""
+    rng = np.random.default_rng(29)
+    out = []
+    for k in range(60):                      # equal lengths: read through strided views
+        out.append((1_000 + k, 7 + k, 1_000 * k + 1, 'stator', rng.normal(size=6) * 1e3))
+    stamps = [(-3, 5), (2**31 - 1, 999_999_999), (0, 0), (12, 1)]
+    for k, ((sec, nanosec), frame) in enumerate(zip(stamps, ['', 'a', 'rotor_frame_x', 'ab'])):
+        out.append((9_000 + k, sec, nanosec, frame, rng.normal(size=6) * 1e-3))
+    return out
+
+
+@pytest.mark.parametrize('chunking', [True, False], ids=['chunks', 'loose'])
+def test_wrench_samples_are_rosbags_decoding_of_every_message(chunking, tmp_path):
+    """
+    Stamps (int32 sec, negative too, and uint32 nanosec) and the six floats of each wrench.
+
+    60 messages of one length (strided gathering), then four of other frame ids (gathered
+    by bytes): each message's stamp in ns and wrench equal to rosbags', exactly; a
+    channel with no messages gives empty arrays of the documented shapes.
+    """
+    written = wrench_messages()
+    path = write_with_mcap_library(
+        tmp_path / 'wrench.mcap', {'/load': WRENCH, '/empty': WRENCH},
+        [('/load', log, wrench(sec, ns, frame, values))
+         for log, sec, ns, frame, values in written], chunking=chunking)
+    theirs = read_with_mcap_library(path, '/load', WRENCH)
+    assert len(theirs) == len(written) == 64
+    bag = Bag(path)
+    assert bag.problems == []
+    stamp, force, torque = wrench_samples(bag, bag.channel('/load', WRENCH))
+    expected_stamp = [m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+                      for _, m in theirs]
+    assert stamp.dtype == np.int64 and stamp.tolist() == expected_stamp
+    assert stamp[60] == -3 * 10**9 + 5 and stamp[61] == (2**31 - 1) * 10**9 + 999_999_999
+    w = [m.wrench for _, m in theirs]
+    assert force.tolist() == [[v.force.x, v.force.y, v.force.z] for v in w]
+    assert torque.tolist() == [[v.torque.x, v.torque.y, v.torque.z] for v in w]
+    empty = wrench_samples(bag, bag.channel('/empty', WRENCH))
+    assert [(a.shape, a.dtype) for a in empty] == \
+        [((0,), np.int64), ((0, 3), np.float64), ((0, 3), np.float64)]
+
+
+def test_joint_states_of_publishers_of_several_lengths_in_one_chunk(tmp_path):
+    """
+    Interleaved publishers (one chunk): the rows by name, as rosbags decodes them.
+
+    Four publishers on one topic: A (frame 'a'; names gantry_joint, tube), B (frame
+    'longer frame'; names in the other order), C (frame 'b': A's length, other bytes),
+    D (no gantry_joint: skipped and its names said) and E (gantry_joint without a
+    velocity: rejected). Stamps, log times, angle and speed of each A, B, C message equal
+    rosbags' decoding picked by the joint's name; written out of log-time order, they come
+    sorted.
+    """
+    messages = []
+    for n in range(30):
+        log = 10_000 - 7 * n if n % 5 == 0 else 10_000 + 11 * n     # some out of order
+        sec, ns = 100 + n, 1_000 * n + 3
+        q, w = 0.01 * n - 0.1, 2.0 + n
+        which = n % 5
+        if which == 0:
+            data = joint_state(sec, ns, 'a', ['gantry_joint', 'tube'], [q, 9.0], [w, 8.0])
+        elif which == 1:
+            data = joint_state(sec, ns, 'longer frame', ['tube', 'gantry_joint'], [7.0, q],
+                               [6.0, w])
+        elif which == 2:
+            data = joint_state(sec, ns, 'b', ['gantry_joint', 'tube'], [q, 5.0], [w, 4.0])
+        elif which == 3:
+            data = joint_state(sec, ns, 'a', ['table', 'tilt'], [q, 1.0], [w, 1.0])
+        else:
+            data = joint_state(sec, ns, 'a', ['gantry_joint'], [q], [])
+        messages.append(('/joint_states', log, data))
+    path = write_with_mcap_library(tmp_path / 'joints.mcap', {'/joint_states': JOINT},
+                                   messages, chunk_size=1 << 20)
+    theirs = read_with_mcap_library(path, '/joint_states', JOINT)
+    rows = []
+    for log, m in theirs:
+        if 'gantry_joint' in m.name and len(m.velocity):
+            i = list(m.name).index('gantry_joint')
+            rows.append((m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, log,
+                         m.position[i], m.velocity[i]))
+    rows.sort(key=lambda r: r[1])
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert len(rows) == 18
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == rows
+    assert (motion.skipped, motion.rejected, motion.joints_seen) == (6, 6, ['table', 'tilt'])
+    assert motion.reasons == ['6 /joint_states messages not readable as JointState with '
+                              'position and velocity']
+
+
+def test_an_unreadable_string_message_is_said_and_the_rest_sorted(tmp_path):
+    """
+    A String whose length runs past its message costs itself, said in one line.
+
+    Three layout texts written out of log-time order and one damaged (its length field
+    says 200 bytes in a message of 12): the three texts in log-time order, as the mcap
+    library and rosbags read them, and the one line naming the topic and log time.
+    """
+    good = [(30, 'third'), (10, 'first'), (20, 'second')]
+    damaged = b'\x00\x01\x00\x00' + (200).to_bytes(4, 'little') + b'abc\x00'
+    messages = [('/layout', log, TYPESTORE.serialize_cdr(
+        TYPESTORE.types[STRING](data=text), STRING).tobytes()) for log, text in good]
+    messages.insert(1, ('/layout', 15, damaged))
+    path = write_with_mcap_library(tmp_path / 'layouts.mcap', {'/layout': STRING}, messages)
+    with open(path, 'rb') as stream:
+        raw = [(m.log_time, m.data) for *_, m in make_reader(stream).iter_messages()]
+    assert (15, damaged) in raw
+    theirs = sorted((log, TYPESTORE.deserialize_cdr(data, STRING).data)
+                    for log, data in raw if data != damaged)
+    bag = Bag(path)
+    assert string_samples(bag, bag.channel('/layout', STRING)) == theirs
+    assert bag.problems == ['/layout: message at 15 ns unreadable (string length beyond the '
+                            'message); skipped']
+
+
+def test_messages_of_a_channel_in_file_order_with_their_log_times(tmp_path):
+    """``Bag.messages``: every message's log time and bytes, as the mcap library reads them."""
+    written = wrench_messages()
+    path = write_with_mcap_library(
+        tmp_path / 'w.mcap', {'/load': WRENCH},
+        [('/load', log, wrench(sec, ns, frame, values))
+         for log, sec, ns, frame, values in written], chunk_size=600,
+        compression=CompressionType.ZSTD)
+    with open(path, 'rb') as stream:
+        theirs = [(m.log_time, bytes(m.data)) for *_, m in make_reader(stream).iter_messages()]
+    bag = Bag(path)
+    assert len(bag.chunks) > 4
+    assert bag.messages(bag.channel('/load', WRENCH)) == theirs
+
+
+# -- a chunk without message indexes, written by hand ------------------------------------
+
+def record(opcode, body):
+    return struct.pack('<BQ', opcode, len(body)) + body
+
+
+def text(value):
+    data = value.encode()
+    return struct.pack('<I', len(data)) + data
+
+
+def message(channel, sequence, log_time, data):
+    return record(0x05, struct.pack('<HIQQ', channel, sequence, log_time, log_time) + data)
+
+
+def float64(value):
+    return b'\x00\x01\x00\x00' + struct.pack('<d', value)     # CDR: aligned after the 4
+
+
+def hand_bag(chunk_records):
+    """Return an MCAP file by hand: a header, one uncompressed chunk (CRC 0), no index."""
+    definitions = record(0x03, struct.pack('<H', 1) + text(FLOAT64) + text('ros2msg') +
+                         text('')) + \
+        record(0x04, struct.pack('<HH', 1, 1) + text('/speed') + text('cdr') +
+               struct.pack('<I', 0))
+    records = definitions + b''.join(chunk_records)
+    chunk = record(0x06, struct.pack('<QQQI', 0, 0, len(records), 0) + text('') +
+                   struct.pack('<Q', len(records)) + records)
+    header = record(0x01, text('ros2') + text('by hand'))
+    body = MAGIC + header + chunk + record(0x0F, struct.pack('<I', 0))
+    return body + record(0x02, struct.pack('<QQI', 0, 0, 0)) + MAGIC, len(MAGIC + header), \
+        len(definitions)
+
+
+FLOAT64 = 'std_msgs/msg/Float64'
+MAGIC = b'\x89MCAP0\r\n'
+# Log times: a run of 12 equal records (one of them out of order, one tie), an empty
+# message (22 bytes: the shortest message record) on the run's stride, Float64s cut to
+# 8 and to 11 bytes of data (12 whole), and three more.
+SPEEDS = [(100 + 10 * k, 0.5 * k) for k in range(12)] + [(130, 99.0)]
+SPEEDS[5] = (40, -2.5)
+TAIL = [(200, 1.25), (150, -7.0), (200, 3.5)]
+
+
+def speed_records():
+    out = [message(1, k, log, float64(w)) for k, (log, w) in enumerate(SPEEDS)]
+    out.append(message(1, 20, 170, b''))
+    out.append(message(1, 21, 175, float64(8.0)[:8]))
+    out.append(message(1, 22, 176, float64(9.0)[:11]))      # one byte short of whole
+    out += [message(1, 30 + k, log, float64(w)) for k, (log, w) in enumerate(TAIL)]
+    return out
+
+
+def test_a_chunk_without_message_indexes_is_walked_record_by_record(tmp_path):
+    """
+    A chunk without message indexes: its records walked in runs of equal records.
+
+    Each message's log time and bytes as the ``mcap`` library's stream reader gives them
+    (the empty one too); the speeds of the whole Float64 messages (12 bytes of data or
+    more: not the empty one, not those cut to 8 and 11 bytes) by hand, sorted by log time, ties
+    in file order.
+    """
+    from mcap.records import Message
+    from mcap.stream_reader import StreamReader
+    data, _, _ = hand_bag(speed_records())
+    path = tmp_path / 'hand.mcap'
+    path.write_bytes(data)
+    theirs = [(r.log_time, bytes(r.data)) for r in StreamReader(io.BytesIO(data)).records
+              if isinstance(r, Message)]
+    assert len(theirs) == 19
+    bag = Bag(path)
+    assert bag.problems == []
+    channel = bag.channel('/speed', FLOAT64)
+    assert bag.messages(channel) == theirs
+    times, speeds = float64_samples(bag, channel)
+    expected = sorted(SPEEDS + TAIL, key=lambda pair: pair[0])     # stable: ties in order
+    assert times.dtype == np.int64 and speeds.dtype == np.float64
+    assert list(zip(times.tolist(), speeds.tolist())) == expected
+
+
+def test_float64_samples_sort_only_what_is_out_of_order(tmp_path):
+    """Log times 5, 10, 7 (none before the first): sorted all the same; none: empty arrays."""
+    data, _, _ = hand_bag([message(1, 0, 5, float64(1.0)), message(1, 1, 10, float64(2.0)),
+                           message(1, 2, 7, float64(3.0))])
+    path = tmp_path / 'three.mcap'
+    path.write_bytes(data)
+    bag = Bag(path)
+    times, speeds = float64_samples(bag, bag.channel('/speed', FLOAT64))
+    assert times.tolist() == [5, 7, 10] and speeds.tolist() == [1.0, 3.0, 2.0]
+    data, _, _ = hand_bag([])
+    path.write_bytes(data)
+    bag = Bag(path)
+    empty = float64_samples(bag, bag.channel('/speed', FLOAT64))
+    assert [(a.shape, a.dtype) for a in empty] == [((0,), np.int64), ((0,), np.float64)]
+
+
+def test_a_record_too_short_for_a_message_is_not_taken_for_one(tmp_path):
+    """
+    A record of opcode 5 and length 21 (a message needs 22: channel, sequence, two times).
+
+    Not a message: the chunk's other messages are read as without it, nothing made up.
+    """
+    bogus = record(0x05, struct.pack('<HIQ', 1, 9, 160) + b'\x00' * 7)
+    assert len(bogus) == 9 + 21
+    records = speed_records()
+    data, _, _ = hand_bag(records)
+    (tmp_path / 'good.mcap').write_bytes(data)
+    good = Bag(tmp_path / 'good.mcap')
+    expected = good.messages(good.channel('/speed', FLOAT64))
+    data, _, _ = hand_bag(records[:13] + [bogus] + records[13:])
+    (tmp_path / 'bogus.mcap').write_bytes(data)
+    bag = Bag(tmp_path / 'bogus.mcap')
+    assert bag.messages(bag.channel('/speed', FLOAT64)) == expected
+    assert len(expected) == 19
+
+
+def test_a_record_running_past_its_chunks_end_is_said_and_the_rest_read(tmp_path):
+    """
+    The chunk's last record says it is 1000 bytes longer than the chunk holds.
+
+    The problem line names the chunk's byte in the file, where the walk stopped and the
+    records' length (by hand); every message before that record is read.
+    """
+    records = speed_records()
+    last = bytearray(records[-1])
+    struct.pack_into('<Q', last, 1, len(last) - 9 + 1000)
+    data, chunk_at, definitions = hand_bag(records[:-1] + [bytes(last)])
+    path = tmp_path / 'long.mcap'
+    path.write_bytes(data)
+    bag = Bag(path)
+    channel = bag.channel('/speed', FLOAT64)
+    assert [log for log, _ in bag.messages(channel)] == \
+        [log for log, _ in SPEEDS] + [170, 175, 176] + [log for log, _ in TAIL[:-1]]
+    stop = definitions + sum(len(r) for r in records[:-1])
+    size = stop + len(last)
+    assert bag.problems == [f"chunk at byte {chunk_at}: a record runs past the chunk's end "
+                            f'at byte {stop} of its {size}; the rest of the chunk skipped']
+
+
+def test_a_damaged_channel_record_in_a_chunk_costs_only_itself(tmp_path):
+    """
+    A second Channel record in the chunk whose topic length runs past the chunk's records.
+
+    Said in one line (the chunk's byte, the record's opcode and offset by hand); the
+    channel defined before it and its messages are read as without it.
+    """
+    damaged = record(0x04, struct.pack('<HH', 2, 1) + struct.pack('<I', 1 << 24) + b'/x')
+    records = speed_records()
+    data, chunk_at, definitions = hand_bag([damaged] + records)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(data)
+    bag = Bag(path)
+    channel = bag.channel('/speed', FLOAT64)
+    assert len(bag.messages(channel)) == 19
+    assert bag.topics() == {'/speed': FLOAT64}
+    assert bag.problems == [f'chunk at byte {chunk_at}: corrupt record (opcode 0x4) at '
+                            f'{definitions}: string beyond the record; skipped']
+
+
+def test_a_topic_of_the_wrong_type_names_every_topic_of_the_bag():
+    """The refusal's one line: each topic with its type, '(no schema)' for one without."""
+    from cvc_balance.bag.mcap_reader import BagError, ChannelInfo, select_channel
+    channels = [ChannelInfo(1, '/speed', FLOAT64, 'cdr'), ChannelInfo(2, '/layout', '', 'cdr'),
+                ChannelInfo(3, '/joint_states', JOINT, 'cdr')]
+    with pytest.raises(BagError) as refused:
+        select_channel(channels, 'speed', STRING, 'x.mcap')
+    assert str(refused.value) == (
+        f'x.mcap: topic /speed has type {FLOAT64}, expected {STRING}; the bag has: '
+        f'/joint_states ({JOINT}), /layout (no schema), /speed ({FLOAT64})')
+
+
+def test_a_run_of_equal_records_is_counted_to_its_last_one():
+    """
+    ``_run``: how many records from a position share the first's opcode and length.
+
+    1000 equal messages (30-byte records: many of ``_run``'s growing blocks), then one of
+    another length, or another opcode of the same length, at each of several places: the
+    count is that place, by construction; the records' table lists every record.
+    """
+    from cvc_balance.bag.mcap_reader import _run, record_table
+    same = message(1, 0, 7, b'\x00' * 8)
+    step = len(same)
+    for at in (2, 3, 17, 18, 83, 500, 999):
+        for other in (message(1, 0, 7, b'\x00' * 9), record(0x07, b'\x00' * (step - 9))):
+            buffer = np.frombuffer(same * at + other + same * (1000 - at), np.uint8)
+            assert _run(buffer, 0, step, 0x05, step - 9) == at
+            offsets, opcodes, lengths, end = record_table(buffer)
+            expected = [step * k for k in range(at + 1)] + \
+                [step * (at + 1) + len(other) - step + step * k for k in range(1000 - at)]
+            assert offsets.tolist() == expected and end == len(buffer)
+            assert opcodes.tolist() == [5] * at + [other[0]] + [5] * (1000 - at)
+    buffer = np.frombuffer(same * 1000, np.uint8)
+    assert _run(buffer, 0, step, 0x05, step - 9) == 1000
+    assert _run(buffer, step * 990, step, 0x05, step - 9) == 10
+
+
+def test_the_records_table_of_edge_buffers():
+    """
+    ``record_table`` at its edges: no records, a torn header, a last record of 9 bytes.
+
+    The table of an empty buffer (an empty chunk) is three empty arrays of int64, uint8,
+    int64 and ``end`` 0; of 5 bytes (less than a record's header), the same; a record of
+    no body (9 bytes, opcode and length 0) ending the buffer exactly is listed, and
+    ``end`` is the buffer's length.
+    """
+    from cvc_balance.bag.mcap_reader import record_table
+    for data in (b'', b'\x05\x00\x00\x00\x00'):
+        offsets, opcodes, lengths, end = record_table(np.frombuffer(data, np.uint8))
+        assert [(a.shape, a.dtype) for a in (offsets, opcodes, lengths)] == \
+            [((0,), np.int64), ((0,), np.uint8), ((0,), np.int64)] and end == 0
+    same = message(1, 0, 7, b'\x00' * 8)
+    for tail in (record(0x07, b''), record(0x07, b'') * 2, same + record(0x07, b'')):
+        data = same * 3 + tail
+        offsets, opcodes, lengths, end = record_table(np.frombuffer(data, np.uint8))
+        assert end == len(data)
+        assert offsets[-1] == len(data) - 9 and opcodes[-1] == 7 and lengths[-1] == 0
+
+
+# -- a damaged record in a recording without a summary: the walk goes on by itself --------
+
+def top_level(data):
+    """[(offset, opcode, length)] of a file's top-level records, walked by hand."""
+    position, found = 8, []
+    while position + 9 <= len(data):
+        opcode, length = struct.unpack_from('<BQ', data, position)
+        if position + 9 + length > len(data):
+            break
+        found.append((position, opcode, length))
+        position += 9 + length
+    return found
+
+
+def stream_messages(data, topic='/joint_states'):
+    """(log time, bytes) of ``topic``'s messages the mcap library's stream reader reads."""
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    out, topics = [], {}
+    try:
+        for r in StreamReader(io.BytesIO(data)).records:
+            if isinstance(r, Channel):
+                topics[r.id] = r.topic
+            elif isinstance(r, Message) and topics[r.channel_id] == topic:
+                out.append((r.log_time, bytes(r.data)))
+    except Exception as error:                  # the end of a cut file
+        assert type(error).__name__ == 'EndOfFile', error
+    return out
+
+
+@pytest.fixture(scope='module')
+def cut_recording(tmp_path_factory):
+    """Return a recording killed after its fifth chunk (no summary) and its records."""
+    import yaml
+    from independent import ramp, write_input_bag
+    from test_survivors import GANTRY
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=3.0)
+    path = write_input_bag(tmp_path_factory.mktemp('cut') / 'whole.mcap', stamps, angle,
+                           omega, [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    data = path.read_bytes()
+    chunks = [(o, n) for o, op, n in top_level(data) if op == 0x06]
+    data = data[:chunks[4][0] + 9 + chunks[4][1]]
+    return data, top_level(data)
+
+
+@pytest.mark.parametrize('damage, number', [('length', 1), ('length and data', 1),
+                                            ('length and data', 3), ('a false record', 1),
+                                            ('header length', 0x01), ('schema length', 0x03),
+                                            ('channel length', 0x04)])
+def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_path):
+    """
+    A chunk's length field says 1 MiB more than the file holds (and its data is damaged).
+
+    Without a summary no chunk index says where chunks are: the walk goes on by itself.
+    With its data whole the chunk's own fields (its CRC holds) give its length: every
+    message is read, as the mcap library reads the undamaged file. With a byte of its
+    data flipped too, the walk goes on at the next chunk: every message but that chunk's,
+    as the mcap library reads the file without it; the line says how many bytes were
+    skipped to which byte (by hand from the top-level records), and the next that the
+    recording is cut (it was not said when another problem was). Chunk 3: the next whole
+    record is the last, ending at the file's end. A false record: the damage looks like a
+    Channel record's opcode and a length that fits the file (10), its fields not. The
+    length field of the Header, the first Schema or the first Channel damaged: each read
+    by its own fields.
+    """
+    data, records = cut_recording
+    chunks = [(o, n) for o, op, n in records if op == 0x06]
+    (at, length), (following, _) = chunks[number % 4], chunks[number % 4 + 1]
+    damaged = bytearray(data)
+    if damage.endswith(' length'):       # the first Header, Schema or Channel record
+        at, length = next((o, n) for o, op, n in records if op == number)
+    struct.pack_into('<Q', damaged, at + 1, length + (1 << 20))
+    if damage.endswith('length'):
+        expected = stream_messages(data)
+        said = (f'record (opcode 0x{data[at]:02x}) at byte {at} runs past the end of the '
+                f'file: its length field ({length + (1 << 20)}) is damaged, its fields give '
+                f'{length}: read by them')
+    else:
+        if damage == 'a false record':
+            struct.pack_into('<BQ', damaged, at + 9 + length // 2, 0x04, 10)
+        else:
+            damaged[at + 9 + length // 2] ^= 0xFF
+        expected = stream_messages(data[:at] + data[following:])
+        said = (f'record (opcode 0x06) at byte {at} runs past the end of the file: '
+                f'{following - at} bytes skipped to the next whole record at byte {following}')
+    assert number != 3 or damage.endswith('length') or \
+        following + 9 + chunks[number + 1][1] == len(data)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(damaged))
+    bag = Bag(path)
+    ours = bag.messages(bag.channel('/joint_states', JOINT))
+    assert len(ours) > 100 and ours == expected
+    assert bag.problems == [said, 'file has no end of data (truncated recording?)']

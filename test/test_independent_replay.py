@@ -1,0 +1,153 @@
+"""
+Replay's output bag, message by message, against the mcap library and rosbags (issue 29).
+
+A short input bag (200 JointState samples of a spin-up, serialised by rosbags, and the
+gantry's layout) is replayed; its output is read back by the ``mcap`` library (every
+message, counted per topic) and decoded by rosbags: one message per accepted sample on
+each output topic, with the input's stamps and log times, and the unbalance force
+S omega^2 with S = sum m r e^(i angle) of the layout's components by hand.
+"""
+
+import cmath
+import math
+from pathlib import Path
+
+from mcap.reader import make_reader
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
+import yaml
+
+from cvc_balance.bag.mcap_reader import Bag, BagError
+from cvc_balance.bag.replay import layout_events, replay
+from independent import ramp, write_input_bag
+
+ROOT = Path(__file__).resolve().parents[1]
+GANTRY_FILE = ROOT / 'config' / 'ct_gantry.yaml'
+GANTRY = yaml.safe_load(GANTRY_FILE.read_text())
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
+
+
+@pytest.fixture(scope='module')
+def replayed(tmp_path_factory):
+    """(input stamps, output messages {topic: [(log time, message)]}, summary)."""
+    folder = tmp_path_factory.mktemp('replay')
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=1.0)
+    bag = write_input_bag(folder / 'in.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    summary = replay(bag, folder / 'out.mcap')
+    out = {}
+    with open(folder / 'out.mcap', 'rb') as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+            out.setdefault(channel.topic, []).append(
+                (message.log_time, channel.schema_id, bytes(message.data)))
+    return stamps, omega, out, summary
+
+
+def test_one_output_message_per_accepted_sample(replayed):
+    """Each output topic: 200 messages, the input's stamps (header) and log times, in order."""
+    stamps, _, out, summary = replayed
+    supports = [f"/supports/{s['name']}/load" for s in GANTRY['supports']]
+    assert summary.accepted == len(stamps) == 200
+    assert sorted(out) == sorted(['/bearing_load', '/unbalance', '/drive_torque', '/layout']
+                                 + supports)
+    assert len(out['/layout']) == 1
+    for topic in set(out) - {'/layout'}:
+        messages = [(log, TYPESTORE.deserialize_cdr(data, WRENCH)) for log, _, data in
+                    out[topic]]
+        assert [log for log, _ in messages] == [int(s) for s in stamps], topic
+        assert [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for _, m in messages] == \
+            [int(s) for s in stamps], topic
+
+
+def test_the_unbalance_force_is_the_layouts_mass_moment_by_hand_times_omega_squared(replayed):
+    """
+    /unbalance (rotor frame): force x + i y = S omega^2, S = sum m r e^(i angle) by hand.
+
+    Every component of config/ct_gantry.yaml is at its radius and angle: S in kg m; the
+    relative error measured 1e-16 (rounding), held to 1e-12.
+    """
+    _, omega, out, _ = replayed
+    s = sum(c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
+            for c in GANTRY['components'])
+    forces = np.array([[m.wrench.force.x, m.wrench.force.y] for m in (
+        TYPESTORE.deserialize_cdr(data, WRENCH) for _, _, data in out['/unbalance'])])
+    expected = np.array([[(s * w * w).real, (s * w * w).imag] for w in omega])
+    assert abs(s) > 0.01
+    np.testing.assert_allclose(forces, expected, rtol=1e-12, atol=1e-12 * abs(s))
+
+
+def test_layout_events_of_a_layout_file_and_of_no_usable_layout(tmp_path):
+    """
+    A layout file holds for the whole run (from the earliest time); no usable layout: one line.
+
+    The line names the bag's path, the topic and type looked for, and the two options.
+    """
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.1)
+    path = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                           [(stamps[0], 'components: [')])
+    bag = Bag(path)
+    events, problems = layout_events(bag, [], GANTRY_FILE)
+    (start, layout), = events
+    assert start == np.iinfo(np.int64).min and problems == []
+    assert [c.name for c in layout.components] == [c['name'] for c in GANTRY['components']]
+    with pytest.raises(BagError) as refused:
+        layout_events(bag, [(int(stamps[0]), 'components: [')])
+    assert str(refused.value) == (
+        f'{path}: no usable layout in the bag (topic layout, std_msgs/msg/String); name its '
+        'topic with --layout-topic or give a layout file with --layout-file')
+
+
+def test_the_peak_support_loads_of_a_light_rotor_are_pinocchios(tmp_path):
+    """
+    Each support's peak |force| over a segment, by Pinocchio's RNEA at every sample.
+
+    The gantry with every mass a millionth (loads of milli-newtons, every one under 1 N), at
+    a steady 3 rad/s (the estimated acceleration 0): the summary's peaks are the largest
+    of Pinocchio's per-sample loads split over the supports by statics (relative error
+    measured 1e-15, held to 1e-9).
+    """
+    from independent import PinocchioRotor
+    light = yaml.safe_load(GANTRY_FILE.read_text())
+    for c in light['components']:
+        c['mass'] *= 1e-6
+    stamps, angle, omega = ramp(3.0, 0.0, rate=200.0, seconds=1.0)
+    bag = write_input_bag(tmp_path / 'light.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(light))])
+    (segment,) = replay(bag).segments
+    rotor = PinocchioRotor(light)
+    peaks = {}
+    for q, w in zip(angle, omega):
+        for name, (force, _) in rotor.loads(q, w, 0.0)['supports'].items():
+            peaks[name] = max(peaks.get(name, 0.0), float(np.linalg.norm(force)))
+    assert set(segment.peak_support) == set(peaks) and 0.0 < max(peaks.values()) < 1.0
+    for name, peak in peaks.items():
+        assert segment.peak_support[name] == pytest.approx(peak, rel=1e-9), name
+
+
+def test_rejected_layout_messages_are_said_one_by_one_up_to_five(tmp_path, monkeypatch):
+    """
+    Five rejected: five lines and no count; a parser's own failure is said as internal.
+
+    A layout text that makes the parser itself fail (put in by hand) is said with its
+    exception's type and text, and the previous layout stays in force.
+    """
+    import importlib
+    module = importlib.import_module('cvc_balance.bag.replay')
+    parse = module.layout_from_text
+
+    def failing(text, **kwargs):
+        if text == 'boom':
+            raise RuntimeError('the parser failed')
+        return parse(text, **kwargs)
+    monkeypatch.setattr(module, 'layout_from_text', failing)
+    good = yaml.safe_dump(GANTRY)
+    messages = [(10**9, good)] + [(k * 10**9, 'components: [') for k in range(2, 6)] + \
+        [(6 * 10**9, 'boom')]
+    events, problems = module.layouts_in_force(None, messages)
+    assert len(events) == 1 and len(problems) == 5
+    assert problems[4] == ('layout at 6.000 s rejected (previous stays in force): internal '
+                           'error: RuntimeError: the parser failed')
+    assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
+               for k, p in zip(range(2, 6), problems))
