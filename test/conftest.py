@@ -8,6 +8,7 @@ import pytest
 
 from ros_harness import NodeProcess
 
+
 def _listed(name):
     """Return the tests a list beside this file names (``file::function`` or ``file``)."""
     return {line.strip() for line in (Path(__file__).parent / name).read_text().splitlines()
