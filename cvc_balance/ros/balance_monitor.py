@@ -309,10 +309,10 @@ class BalanceMonitor(Node):
                                           topics.measured_load('*'), topics.DIAGNOSTICS),
                                          machine_id=self.params['machine_id'] or None,
                                          label=label)
-        elif label is not None:
-            raise ValueError('record_run and record_trial label a recording: set record_path')
             for topic in topics.OUTPUTS:
                 self._record[topic] = self._recorder.add(topic, topics.WRENCH_TYPE)
+        elif label is not None:
+            raise ValueError('record_run and record_trial label a recording: set record_path')
         if self.params['layout_file']:
             self._apply_layout_file(self.params['layout_file'])
         sensor_qos = input_qos(self.params['input_depth'])
