@@ -1117,6 +1117,14 @@ def test_replay_accounts_for_every_input_and_says_why(tmp_path, monkeypatch):
         assert str(error.value) == (
             f"{tmp_path / 'other.mcap'}: no /joint_states message carries joint 'gantry_joint' "
             '(they name: some_other_joint); choose the joint with --joint-name')
+    # Joint states that name no joint at all: said so, not an empty list.
+    nameless = write_input_bag(tmp_path / 'nameless.mcap', stamps[:3], angle[:3], omega[:3],
+                               names=())
+    with pytest.raises(BagError) as error:
+        replay(nameless, layout_file=tmp_path / 'layout.yaml')
+    assert str(error.value) == (f"{nameless}: no /joint_states message carries joint "
+                                "'gantry_joint' (they name no joint); choose the joint with "
+                                '--joint-name')
     at_once = write_input_bag(tmp_path / 'at_once.mcap', stamps[:5], angle[:5], omega[:5],
                               [(first, yaml.safe_dump(LAYOUT))])
     assert replay(at_once).dropped == 0          # logged at the layout's time: it applies

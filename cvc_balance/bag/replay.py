@@ -124,7 +124,7 @@ def read_inputs(bag, joint_name, names=None):
         motion.joint_topic = channels.joint_states.topic
         if not len(motion.stamp) and motion.skipped:
             raise BagError(f'{bag.path}: no {channels.joint_states.topic} message carries '
-                           f"joint '{joint_name}' (they name: {', '.join(motion.joints_seen)}); "
+                           f"joint '{joint_name}' ({_joints_named(motion)}); "
                            'choose the joint with --joint-name')
     else:
         log_time, omega = float64_samples(bag, channels.speed)
@@ -187,6 +187,12 @@ def layouts_in_force(bag, layout_messages, layout_file=None):
     return events, problems
 
 
+def _joints_named(motion):
+    """Say which joints the skipped JointState messages name (none: they name none)."""
+    seen = motion.joints_seen
+    return f"they name: {', '.join(seen)}" if seen else 'they name no joint'
+
+
 def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
            time_constant=0.1, max_speed=1000.0, compression='zstd', progress=None,
            observer=None, tolerance=None, names=None, max_stamp_jump=MAX_STAMP_JUMP):
@@ -215,7 +221,7 @@ def replay(bag_path, output=None, layout_file=None, joint_name='gantry_joint',
     summary.skipped = motion.skipped
     if motion.skipped:
         summary.skipped_reason = (f"{motion.skipped} JointState messages without joint "
-                                  f"'{joint_name}' (they name: {', '.join(motion.joints_seen)})")
+                                  f"'{joint_name}' ({_joints_named(motion)})")
     in_force, layout_problems = layouts_in_force(bag, layout_messages, layout_file)
     summary.problems += layout_problems
     events = [(log_time, layout) for log_time, layout, _ in in_force]
