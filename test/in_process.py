@@ -26,3 +26,9 @@ def cvc(*args):
             code = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
     return subprocess.CompletedProcess(['cvc-balance', *argv], code, out.getvalue(),
                                        err.getvalue())
+
+
+def run_cli(*args):
+    """Run the command line here: (exit code, stdout, stderr)."""
+    done = cvc(*args)
+    return done.returncode, done.stdout, done.stderr

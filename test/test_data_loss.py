@@ -10,9 +10,7 @@ Each case: the figures a person reads (exit code, the one line, the table's rows
 the user's files byte for byte as they were. The reindex findings are in test_reindex.py.
 """
 
-import contextlib
 import hashlib
-import io
 import json
 import os
 from pathlib import Path
@@ -28,8 +26,8 @@ import pytest
 
 from cvc_balance.bag.mcap_reader import Bag
 from cvc_balance.bag.rosbag2 import open_writer
-from cvc_balance.cli import main
 from cvc_balance.messages.cdr import string_message
+from in_process import run_cli
 from ros_harness import ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,17 +35,6 @@ BAGS = ROOT / 'bags'
 TILTED = BAGS / 'tilted_shift.mcap'
 HOSTILE = 'a: &a [*a]'
 """The layout message of issue 24: a YAML alias that holds itself."""
-
-
-def run_cli(*argv):
-    """Run the command line in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as stop:
-            code = stop.code
-    return code, out.getvalue(), err.getvalue()
 
 
 def cli(*args, timeout=60):

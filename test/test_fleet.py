@@ -12,10 +12,8 @@ the documented byte stream, the identity records against the ``mcap`` library's 
 and rosbags. No timing is asserted (see benchmarks/fleet_throughput.py).
 """
 
-import contextlib
 from datetime import timedelta
 import hashlib
-import io
 import json
 import math
 from pathlib import Path
@@ -33,25 +31,14 @@ import pytest
 import yaml
 
 from cvc_balance.bag.machine import bag_custom_data, machine_of
-from cvc_balance.cli import main
 from cvc_balance.fleet import content_digest, find_bags, simulate_fleet
 from cvc_balance.fleet.trends import LEAVES, machine_trends
+from in_process import run_cli
 from ros_harness import NodeProcess, ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT = ROOT / 'config' / 'ct_gantry.yaml'
 MACHINES, RUNS = 20, 5
-
-
-def run_cli(*argv):
-    """Run the command line in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as stop:          # argparse's errors
-            code = stop.code
-    return code, out.getvalue(), err.getvalue()
 
 
 @pytest.fixture(scope='module')

@@ -11,8 +11,6 @@ hand: 180 / pi = 57.30, pi / 30 = 0.1047, 1 / 1000 (and the cell's zero offset, 
 too: 360 N on a share of 3583 N), -1.
 """
 
-import contextlib
-import io
 import json
 import math
 from pathlib import Path
@@ -20,22 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cvc_balance.cli import main
 import tach_bags
+from in_process import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 JOINT_STATE, WRENCH = 'sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped'
-
-
-def run_cli(*argv):
-    """Run the command line in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as stop:
-            code = stop.code
-    return code, out.getvalue(), err.getvalue()
 
 
 def rewrite(msg_type, change, topic):

@@ -9,8 +9,6 @@ label can catch (runs swapped, a trial weight typed in grams, a trial run withou
 are refused with one line naming the bag.
 """
 
-import contextlib
-import io
 import json
 from pathlib import Path
 import signal
@@ -22,24 +20,13 @@ from mcap.reader import make_reader
 import pytest
 import yaml
 
-from cvc_balance.cli import main
+from in_process import run_cli
 from ros_harness import ros_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 BAGS = ROOT / 'bags'
 TRIAL_I, TRIAL_II = 'I:0.2@0,0.68', 'II:0.2@0,0.68'
 """The bundled trial runs' weights (bags/field_trial_*.yaml: 200 g at the 0 deg hole)."""
-
-
-def run_cli(*argv):
-    """Run the command line in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as stop:
-            code = stop.code
-    return code, out.getvalue(), err.getvalue()
 
 
 def metadata_of(path):

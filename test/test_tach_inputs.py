@@ -26,8 +26,6 @@ Stated errors (measured in brackets):
   of the larger 95 % radius of the two [0.05].
 """
 
-import contextlib
-import io
 import json
 import math
 from pathlib import Path
@@ -42,8 +40,8 @@ from cvc_balance.bag.mcap_reader import Bag, wrench_samples
 from cvc_balance.bag.replay import replay
 from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.bag.scenario import exact_motion
-from cvc_balance.cli import main
 from independent import PinocchioRotor
+from in_process import run_cli
 import tach_bags
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,17 +54,6 @@ is interpolated: a sample sees the marks 4 revolutions before its period to 4 af
 """
 SETTLED = (STEADY[0] + 1.0, STEADY[1])
 """The loads' steady stretch: also 10 time constants (0.1 s) of the alpha estimate later."""
-
-
-def run_cli(*argv):
-    """Run the command line in this process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as stop:
-            code = stop.code
-    return code, out.getvalue(), err.getvalue()
 
 
 @pytest.fixture(scope='module')
