@@ -7,6 +7,7 @@ and placements (SE3), then runs the recursive Newton-Euler algorithm on one
 revolute joint about Z.
 """
 
+import cmath
 import math
 
 import numpy as np
@@ -177,3 +178,29 @@ def method_error(name, layout, q, omega, alpha, gravity=None):
     prepare, compute = METHODS[name]
     result = compute(prepare(layout), q, omega, alpha, gravity)
     return max(_relative(got, ref) for got, ref in zip(result, reference))
+
+
+def planes_by_hand(layout):
+    """
+    Return plane I and II unbalance (kg m, complex) of a layout's components as points.
+
+    ISO 21940-2's lever rule over a layout mapping with ``balancing.planes`` and each
+    component's ``angle_deg``.
+    """
+    z_i, z_ii = layout['balancing']['planes']
+    planes = [0j, 0j]
+    for c in layout['components']:
+        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
+        planes[0] += u * (z_ii - c['z']) / (z_ii - z_i)
+        planes[1] += u * (c['z'] - z_i) / (z_ii - z_i)
+    return planes
+
+
+def shares_by_hand(layout):
+    """Return each plane's permissible share (kg m) at the service speed (ISO 21940-11)."""
+    z_i, z_ii = layout['balancing']['planes']
+    mass = sum(c['mass'] for c in layout['components'])
+    z_com = sum(c['mass'] * c['z'] for c in layout['components']) / mass
+    u_per = layout['balancing']['grade'] * 1e-3 * mass / layout['balancing']['service_speed']
+    return [u_per * min(max(lever, 0.3), 0.7)
+            for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]

@@ -14,7 +14,6 @@ other about the centre of mass, kept within 0.3-0.7). The declared mass and cent
 judge the measured rotor too (cells cannot weigh it; 0.9 kg of 950 is 0.1 %).
 """
 
-import cmath
 import json
 import math
 from pathlib import Path
@@ -32,6 +31,7 @@ from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
 from in_process import cvc
 from independent import PinocchioRotor, TYPESTORE
+from reference import planes_by_hand, shares_by_hand
 
 ROOT = Path(__file__).resolve().parents[1]
 DECLARED = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
@@ -98,31 +98,10 @@ def with_extra(layout, extra):
     return dict(layout, components=layout['components'] + [extra])
 
 
-def by_hand(layout):
-    """Plane I and II unbalance (kg m, complex) of a layout's components as point masses."""
-    z_i, z_ii = layout['balancing']['planes']
-    planes = [0j, 0j]
-    for c in layout['components']:
-        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
-        planes[0] += u * (z_ii - c['z']) / (z_ii - z_i)
-        planes[1] += u * (c['z'] - z_i) / (z_ii - z_i)
-    return planes
-
-
-def permissible_by_hand(layout):
-    """Each plane's permissible share (kg m) at the service speed, ISO 21940-11."""
-    z_i, z_ii = layout['balancing']['planes']
-    mass = sum(c['mass'] for c in layout['components'])
-    z_com = sum(c['mass'] * c['z'] for c in layout['components']) / mass
-    u_per = layout['balancing']['grade'] * 1e-3 * mass / layout['balancing']['service_speed']
-    return [u_per * min(max(lever, 0.3), 0.7)
-            for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]
-
-
 def grade_by_hand(planes, layout=DECLARED):
     """Return the equivalent grade (mm/s): G times the worst plane's fraction of its share."""
     return layout['balancing']['grade'] * max(
-        abs(u) / share for u, share in zip(planes, permissible_by_hand(layout)))
+        abs(u) / share for u, share in zip(planes, shares_by_hand(layout)))
 
 
 @pytest.fixture(scope='module')
@@ -142,24 +121,24 @@ def cli(*args, check=True):
 
 def test_the_declared_layout_is_within_and_the_true_rotor_out_of_g_6_3():
     """The premise, by hand: the layout says OK, the rotor the cells read is out of grade."""
-    declared = grade_by_hand(by_hand(DECLARED))
-    true = grade_by_hand(by_hand(with_extra(DECLARED, EXTRA)))
+    declared = grade_by_hand(planes_by_hand(DECLARED))
+    true = grade_by_hand(planes_by_hand(with_extra(DECLARED, EXTRA)))
     assert declared < 0.8 * 6.3 < 6.3 < true
-    plane_ii = by_hand(with_extra(DECLARED, EXTRA))[1]
+    plane_ii = planes_by_hand(with_extra(DECLARED, EXTRA))[1]
     assert 4.5e5 < abs(plane_ii) * 1e6 < 5.5e5          # the issue's "about 495,000 g mm"
-    assert permissible_by_hand(DECLARED)[1] * 1e6 == pytest.approx(151657, abs=1)
+    assert shares_by_hand(DECLARED)[1] * 1e6 == pytest.approx(151657, abs=1)
 
 
 def test_replay_leads_with_the_measured_rotor(bags):
     """Replay's text: the measured verdict first, the layout's beside it, the difference."""
     lines = cli('replay', bags['differs']).stdout.splitlines()
-    true = by_hand(with_extra(DECLARED, EXTRA))
+    true = planes_by_hand(with_extra(DECLARED, EXTRA))
     measured = json.loads(cli('replay', bags['differs'], '--json').stdout)['segments'][0]
     grade = measured['verdict']['equivalent_grade']
     assert lines[1].startswith("layout 'ct_gantry_demo' (")
     assert lines[2] == (f'  verdict ERROR: G {grade:.3g} at the service speed 23.27 rad/s: '
                         'OUT OF G 6.3 (measured by the load cells)')
-    declared = grade_by_hand(by_hand(DECLARED))
+    declared = grade_by_hand(planes_by_hand(DECLARED))
     assert lines[3] == (f'  the layout expects OK: G {declared:.2g} at the service speed '
                         '23.27 rad/s: WITHIN G 6.3')
     assert lines[4].startswith('  the rotor is not what its layout says: plane II +')
@@ -169,7 +148,7 @@ def test_replay_leads_with_the_measured_rotor(bags):
     # The grade the cells give against the true rotor's by hand, within the fit's radii.
     planes = measured['identified']['identified']['planes']
     slack = max(p['ci95_g_mm'] * 1e-6 / share
-                for p, share in zip(planes, permissible_by_hand(DECLARED))) * 6.3
+                for p, share in zip(planes, shares_by_hand(DECLARED))) * 6.3
     assert abs(grade - grade_by_hand(true)) <= slack
     assert slack < 0.05 * grade
 
@@ -183,7 +162,7 @@ def test_replay_json_verdict_object(bags):
     assert verdict['verdict'] == 'OUT OF G 6.3' and verdict['within_grade'] is False
     assert verdict['reason'] is None
     (plane,) = verdict['disagreements']
-    true_residual = by_hand(with_extra(DECLARED, EXTRA))[1] - by_hand(DECLARED)[1]
+    true_residual = planes_by_hand(with_extra(DECLARED, EXTRA))[1] - planes_by_hand(DECLARED)[1]
     assert plane['plane'] == 'II'
     assert abs(plane['g_mm'] - abs(true_residual) * 1e6) <= plane['ci95_g_mm']
     assert plane['angle_deg'] == pytest.approx(300.0, abs=1.0)
@@ -287,7 +266,7 @@ def test_a_disagreement_within_the_residual_share_is_no_alarm():
     """A residual beyond its 95 % radius but under residual_warn of the share: agreement."""
     from cvc_balance.identify.fit import Estimate
     model = RotorModel.from_layout(parse_layout(DECLARED))
-    share = permissible_by_hand(DECLARED)[1]
+    share = shares_by_hand(DECLARED)[1]
     # A plane II residual of 0.4 of its share (exact, radius tiny): S and P of +dU at z_II.
     d_u = 0.4 * share
     z_ii = DECLARED['balancing']['planes'][1]
@@ -333,7 +312,7 @@ def test_the_node_and_play_lead_with_the_measured_verdict(bags, tmp_path):
                                  'rad/s: WITHIN G 6.3')
     assert values['layout verdict level'] == 'OK'
     # The measured grade against the true rotor's by hand (the node's window: 8 revs).
-    true = grade_by_hand(by_hand(with_extra(DECLARED, EXTRA)))
+    true = grade_by_hand(planes_by_hand(with_extra(DECLARED, EXTRA)))
     assert float(values['achieved grade [mm/s]']) == pytest.approx(true, rel=0.1)
     # Before the cells could tell, the layout's verdict was the headline, labelled.
     first = next(s for s in statuses if 'layout digest' in {kv.key for kv in s.values})
@@ -369,9 +348,9 @@ def test_the_field_report_leads_with_the_measured_grade(bags, tmp_path):
     summary = json.loads(cli('correct', bags['differs'], '--json').stdout)
     before = summary['grade']['before']['equivalent_grade']
     assert f'before, measured by the load cells G {before:.2f} OUT OF G 6.3' in text
-    declared = grade_by_hand(by_hand(DECLARED))
+    declared = grade_by_hand(planes_by_hand(DECLARED))
     assert f'the layout expects OK: G {declared:.2g} at the service speed 23.27 rad/s: ' \
         'WITHIN G 6.3' in text
     assert 'the rotor is not what its layout says: plane II +' in text
-    true = grade_by_hand(by_hand(with_extra(DECLARED, EXTRA)))
+    true = grade_by_hand(planes_by_hand(with_extra(DECLARED, EXTRA)))
     assert before == pytest.approx(true, rel=0.05)

@@ -23,6 +23,7 @@ from cvc_balance.identify.live import SlidingFit
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
 from independent import PinocchioRotor
+from reference import planes_by_hand, shares_by_hand
 
 ROOT = Path(__file__).resolve().parents[1]
 GANTRY = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
@@ -393,26 +394,6 @@ def test_a_sample_rejected_before_the_first_layout_is_not_also_dropped(tmp_path)
 
 
 # -- the verdict of record: when rotor and layout disagree -------------------------------
-
-def planes_by_hand(layout):
-    """Plane I and II unbalance (kg m, complex) of a layout's components (ISO 21940-2)."""
-    z_i, z_ii = layout['balancing']['planes']
-    planes = [0j, 0j]
-    for c in layout['components']:
-        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
-        planes[0] += u * (z_ii - c['z']) / (z_ii - z_i)
-        planes[1] += u * (c['z'] - z_i) / (z_ii - z_i)
-    return planes
-
-
-def shares_by_hand(layout):
-    """Each plane's permissible share (kg m) at the service speed (ISO 21940-11)."""
-    z_i, z_ii = layout['balancing']['planes']
-    mass = sum(c['mass'] for c in layout['components'])
-    z_com = sum(c['mass'] * c['z'] for c in layout['components']) / mass
-    u_per = layout['balancing']['grade'] * 1e-3 * mass / layout['balancing']['service_speed']
-    return [u_per * min(max(lever, 0.3), 0.7)
-            for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]
 
 
 def test_a_residual_beyond_residual_warn_raises_ok_to_warn():
