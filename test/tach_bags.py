@@ -95,6 +95,19 @@ def time_reference(ns, received_ns):
         source='pick-up'), 'sensor_msgs/msg/TimeReference')
 
 
+def copy_channels(writer, bag, leave_out=()):
+    """Copy every channel of ``bag`` but ``leave_out`` into ``writer`` (/layout latched)."""
+    source = Bag(bag)
+    for channel in source.channels.values():
+        if channel.topic in leave_out:
+            continue
+        out = writer.add_channel(channel.topic, channel.msg_type,
+                                 latched=channel.topic == '/layout',
+                                 best_effort=channel.topic != '/layout')
+        for log_time, data in source.messages(channel):
+            writer.write(out, log_time, data)
+
+
 def write_run(folder, root, tach='float64', topic='/keyphasor', tach_values=None,
               marks=None):
     """
@@ -107,17 +120,9 @@ def write_run(folder, root, tach='float64', topic='/keyphasor', tach_values=None
     run = scenario(folder, root)
     encoder, tach_bag = folder / 'encoder.mcap', folder / f'tach_{tach}.mcap'
     write_bag(run, encoder)
-    source = Bag(encoder)
     start = round(run.start * 1e9)
     with BagWriter(tach_bag, chunk_bytes=1 << 16) as writer:
-        for channel in source.channels.values():
-            if channel.topic == '/joint_states':
-                continue
-            out = writer.add_channel(channel.topic, channel.msg_type,
-                                     latched=channel.topic == '/layout',
-                                     best_effort=channel.topic != '/layout')
-            for log_time, data in source.messages(channel):
-                writer.write(out, log_time, data)
+        copy_channels(writer, encoder, leave_out=('/joint_states',))
         if tach == 'float64':
             channel = writer.add_channel(topic, 'std_msgs/msg/Float64', best_effort=True)
             values = tach_volts(run, run.time) if tach_values is None else tach_values

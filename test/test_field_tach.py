@@ -25,12 +25,11 @@ import numpy as np
 import pytest
 import yaml
 
-from cvc_balance.bag.mcap_reader import Bag
 from cvc_balance.bag.mcap_writer import BagWriter
 from cvc_balance.bag.scenario import exact_motion, load_scenario, write_bag
 from cvc_balance.physics.engine import loads, RotorModel
 from cvc_balance.physics.layout import parse_layout
-from tach_bags import float64, tach_volts
+from tach_bags import copy_channels, float64, tach_volts
 
 ROOT = Path(__file__).resolve().parents[1]
 FIELD_LAYOUT = ROOT / 'config' / 'ct_gantry_field.yaml'
@@ -116,15 +115,8 @@ def write_runs(folder, name, extra, seed):
     for kind in ('encoder', 'tach'):
         bag = folder / f'{name}_{kind}.mcap'
         with BagWriter(bag, chunk_bytes=1 << 16) as writer:
-            source = Bag(plain)
-            for channel in source.channels.values():
-                if kind == 'tach' and channel.topic == '/joint_states':
-                    continue
-                copy = writer.add_channel(channel.topic, channel.msg_type,
-                                          latched=channel.topic == '/layout',
-                                          best_effort=channel.topic != '/layout')
-                for log_time, data in source.messages(channel):
-                    writer.write(copy, log_time, data)
+            copy_channels(writer, plain,
+                          leave_out=('/joint_states',) if kind == 'tach' else ())
             if kind == 'tach':
                 tach = writer.add_channel('/keyphasor', 'std_msgs/msg/Float64',
                                           best_effort=True)
