@@ -78,6 +78,13 @@ def test_calibrate_takes_the_recorded_trials(visit, tmp_path):
                                '--trial', TRIAL_I, '--trial', TRIAL_II, '--json')
     assert code == 0, err
     labelled, typed = json.loads(labelled), json.loads(typed)
+    # What a person reads: the weight each trial run carried, taken from its bag.
+    code, text, err = run_cli('calibrate', *(visit / f'{n}.mcap' for n in
+                                             ('baseline', 'trial_I', 'trial_II')))
+    assert code == 0, err
+    said = [line.split(':')[0] for line in text.splitlines() if 'largest change' in line]
+    assert said == ['  trial run 1 (plane I, 0.2 kg at 0 deg, r 0.68 m)',
+                    '  trial run 2 (plane II, 0.2 kg at 0 deg, r 0.68 m)']
     assert labelled['coefficients'] == typed['coefficients']
     assert labelled['trials'] == typed['trials']
     # The runs given in the other order: the labels travel with the bags, so the plane of

@@ -357,8 +357,12 @@ def format_record(record):
     for trial in record['trials']:
         seen = f"{trial['snr']:.3g} standard errors" if trial['snr'] is not None else \
             f"{trial['relative_change']:.0%} of the readings"
-        lines.append(f"  trial run {trial['run']} (plane {trial['plane']}): largest change "
-                     f"{trial['largest_change']:.4g} = {seen}")
+        # The weight each trial carried, as calibrate used it (typed, or recorded in its bag).
+        weight = (f"{trial['mass']:g} kg at {trial['angle_deg']:g} deg, r {trial['radius']:g} m"
+                  if record['correction_unit'] == 'kg m' else
+                  f"{trial['mass']:g} at {trial['angle_deg']:g} deg")
+        lines.append(f"  trial run {trial['run']} (plane {trial['plane']}, {weight}): largest "
+                     f"change {trial['largest_change']:.4g} = {seen}")
     lines.append(check_line(record.get('model_check')))
     return '\n'.join(lines)
 
