@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from cvc_balance.design.parameters import all_parameters, value_of, with_values
 from cvc_balance.design.sensitivity import judged_vectors, sensitivities
@@ -97,6 +96,7 @@ def solve_balance(layout, free, omega=None, grade=None, bounds=None):
     def jacobian(x):
         return _jacobian(model_at(x), free).reshape(len(free), -1).T
 
+    from scipy.optimize import least_squares   # here: scipy costs every command 1-2 s to import
     scale = np.sum(np.abs(layout.placement[0] * layout.placement[1]))
     fit = least_squares(residual, start, jac=jacobian, bounds=(lower, upper),
                         method='trf', x_scale='jac', xtol=1e-15, ftol=1e-15, gtol=1e-15,

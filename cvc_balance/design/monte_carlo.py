@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import ndtr, ndtri
 
 from cvc_balance.design.parameters import own_products
 from cvc_balance.design.tolerances import TRUNCATION
@@ -46,6 +45,7 @@ def quantile_tables():
 
     Uniform on (-1, 1); the normal with sigma 1/3 truncated at +-1 (3 sigma).
     """
+    from scipy.special import ndtr, ndtri    # here: scipy costs every command 1-2 s to import
     u = (np.arange(LEVELS) + 0.5) / LEVELS
     uniform = 2.0 * u - 1.0
     below = ndtr(-TRUNCATION)

@@ -22,7 +22,6 @@ import itertools
 import math
 
 import numpy as np
-from scipy.stats import chi2
 
 from cvc_balance.field.influence import CHI2_2DOF_95, Trial, trial_weights_on
 from cvc_balance.physics.engine import RotorModel, sample_loads
@@ -216,6 +215,7 @@ def _agreement(case, j):
     off = abs(factor) > AMPLITUDE_FACTOR or abs(factor) < 1.0 / AMPLITUDE_FACTOR \
         or abs(np.angle(factor)) > PHASE_LIMIT
     # Beyond the measurement's own 95 % circle too: noise alone is never a mistake.
+    from scipy.stats import chi2      # here: scipy.stats costs every command ~1 s to import
     unlike = pattern > PATTERN_LIMIT and (not case.noise_known
                                           or left > chi2.ppf(SIGNIFICANT, 2 * len(p)))
     agrees = not ((off and abs(factor - 1.0) > ci95) or unlike)

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.optimize import Bounds, LinearConstraint, milp
 
 POLYGON = 32
 """Directions on which a complex residual's magnitude is measured in the plan."""
@@ -36,6 +35,12 @@ SAME_SITE = 1e-6
 """A weight on already within this angle of a site (rad) sits at that site."""
 MAX_STACK_STATES = 200_000
 """Most partial sums the kit rounding enumerates (then it rounds greedily)."""
+
+
+def _scipy_optimize():
+    """scipy.optimize (HiGHS): imported when a plan is made, not at every command's start."""
+    import scipy.optimize
+    return scipy.optimize
 
 
 @dataclass(frozen=True)
@@ -284,6 +289,7 @@ class _Model:
     """
 
     def __init__(self, problem, sites, polygon, existing=()):
+        optimize = _scipy_optimize()
         self.problem, self.sites = problem, sites
         channels, planes = problem.influence.shape
         self.slots = []
@@ -337,7 +343,7 @@ class _Model:
         rows[:, :slots + 2 * free] = projected.real.reshape(channels * polygon, -1) / scale
         rows[:, slots + 2 * free:] = -np.kron(np.eye(channels), np.ones((polygon, 1)))
         base = (w[:, None] * self.turns[None, :] * problem.baseline[:, None]).real / scale
-        self.residual_rows = LinearConstraint(rows, -np.inf, -base.reshape(-1))
+        self.residual_rows = optimize.LinearConstraint(rows, -np.inf, -base.reshape(-1))
         # A site holds at most ``stack`` weights after: added - taken off <= stack - on.
         stacks = np.zeros((len(site_rows), self.size))
         limits = np.zeros(len(site_rows))
@@ -345,12 +351,13 @@ class _Model:
             for v, sign in entries:
                 stacks[row, v] = sign
             limits[row] = limit
-        self.stack_rows = LinearConstraint(stacks, -np.inf, limits) if site_rows else None
+        self.stack_rows = (optimize.LinearConstraint(stacks, -np.inf, limits) if site_rows
+                           else None)
         upper = np.full(self.size, np.inf)
         lower = np.full(self.size, -np.inf)
         lower[:slots], upper[:slots] = 0.0, upper_of
         lower[slots + 2 * free:] = 0.0
-        self.bounds = Bounds(lower, upper)
+        self.bounds = optimize.Bounds(lower, upper)
         self.integrality = np.zeros(self.size)
         self.integrality[:slots] = 1
 
@@ -365,12 +372,15 @@ class _Model:
         return cost
 
     def residual_at_most(self, bound):
-        return LinearConstraint(self.residual_cost()[None, :], -np.inf, bound)
+        optimize = _scipy_optimize()
+        return optimize.LinearConstraint(self.residual_cost()[None, :], -np.inf, bound)
 
     def count_at_most(self, count):
-        return LinearConstraint(self.count_cost()[None, :], -np.inf, count + 0.5)
+        optimize = _scipy_optimize()
+        return optimize.LinearConstraint(self.count_cost()[None, :], -np.inf, count + 0.5)
 
     def within_limits(self):
+        optimize = _scipy_optimize()
         # Re(e^{-i theta_l} r_c) <= limit_c cos(pi / K): the polygon inside the circle.
         limited = np.flatnonzero(np.isfinite(self.problem.limits))
         limits = self.problem.limits[limited]
@@ -382,13 +392,14 @@ class _Model:
             projected.real.reshape(channels * polygon, -1)
         base = (self.turns[None, :] * self.problem.baseline[limited, None]).real \
             / limits[:, None]
-        return LinearConstraint(rows, -np.inf, (self.cos_half - base).reshape(-1))
+        return optimize.LinearConstraint(rows, -np.inf, (self.cos_half - base).reshape(-1))
 
     def solve(self, cost, extra, time_limit, mip_gap):
+        optimize = _scipy_optimize()
         constraints = [self.residual_rows, *extra]
         if self.stack_rows is not None:
             constraints.append(self.stack_rows)
-        return milp(cost, integrality=self.integrality, bounds=self.bounds,
+        return optimize.milp(cost, integrality=self.integrality, bounds=self.bounds,
                     constraints=constraints,
                     options={'time_limit': time_limit, 'mip_rel_gap': mip_gap})
 

@@ -38,7 +38,6 @@ from datetime import datetime, timedelta, timezone
 import math
 
 import numpy as np
-from scipy import stats
 
 from cvc_balance.fleet.rows import PLANES
 
@@ -347,6 +346,7 @@ def _fit(trend, now):
     variance = float(residual @ residual) / dof
     unscaled = np.linalg.pinv(design.T @ design)
     trend.covariance = variance * unscaled
+    from scipy import stats       # here: scipy.stats costs every command ~1 s to import
     trend.t_quantile = float(stats.t.ppf(0.975, dof))
     trend.levels = list(coefficients[:-1])
     trend.drift = float(coefficients[-1])

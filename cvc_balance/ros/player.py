@@ -5,8 +5,9 @@ Play a bag's inputs into the ROS graph with their timing, and record what comes 
 (transient local), motion samples (joint_states, speed, or a keyphasor's
 messages on ``keyphasor``: the node takes them with ``keyphasor_topic:=keyphasor``)
 as their raw bytes at their log times scaled by 1 / rate. After each layout the player pauses
-50 ms (bag time is then shifted) so that the node has it in force before the
-next sample. With ``-o`` the node's outputs (topics derived from the bag's
+(bag time is then shifted) until the node says, on ``/diagnostics``, that it has that layout
+in force (its digest), so that the next sample is computed with it, as replay computes it;
+at least 50 ms, at most ``wait`` s (a layout the node refuses: then it says so and goes on). With ``-o`` the node's outputs (topics derived from the bag's
 layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
 1 s after the last input. Samples start once the node subscribes to them, the
 recorder has matched the node's outputs, and 1.5 s more (DDS discovery is
@@ -33,12 +34,23 @@ from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
 from cvc_balance.ros.recorder import message_class
 
 LAYOUT_PAUSE = 0.05
+"""Least pause (s) after a layout, and the whole pause for one the player cannot parse."""
 WAIT = 20.0
 """Default time (s) to wait for the node and the recorder before giving up."""
 
 
 class PlayError(RuntimeError):
     """Nothing to play into (no node, no recorder); ``str()`` says what was waited for."""
+
+
+def layout_digest(text):
+    """The digest the node gives a layout on /diagnostics, or None if it is not a layout."""
+    from cvc_balance.physics.layout import LayoutError
+    from cvc_balance.physics.layout_file import layout_from_text
+    try:
+        return layout_from_text(text).digest()
+    except LayoutError:
+        return None
 
 
 def output_topics(layout_texts):
@@ -145,8 +157,26 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
                 stdout=subprocess.PIPE, text=True)
         first_sample = next(i for i, (_, topic, _) in enumerate(events)
                             if topic != topics.LAYOUT)
+        digests = {}
+
+        def put_in_force(data):
+            """Publish a layout; wait until the node has it in force; return the s waited."""
+            if data not in digests:
+                digests[data] = layout_digest(read_string_message(data))
+            digest, seen = digests[data], verdicts.statuses(digests[data])
+            started = time.monotonic()
+            publishers[topics.LAYOUT].publish(data)
+            time.sleep(LAYOUT_PAUSE)
+            if digest is not None and not _wait(lambda: verdicts.statuses(digest) > seen, wait):
+                say(f'play: the node did not put layout {digest} in force within {wait:g} s '
+                    '(refused? see its log); playing on', flush=True)
+            return time.monotonic() - started
+
         for log_time, topic, data in events[:first_sample]:
-            publishers[topic].publish(data)          # the layouts in force from the start
+            if topic == topics.LAYOUT:                # the layouts in force from the start
+                put_in_force(data)
+            else:
+                publishers[topic].publish(data)
         if recorder is not None:
             say(f'play: waiting up to {wait:g} s for the recorder to match the node\'s '
                 f'{node.resolve_topic_name(outputs[0])} output', flush=True)
@@ -164,11 +194,11 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
             left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
             if left > 0:
                 time.sleep(left)
-            publishers[topic].publish(data)
-            published += 1
             if topic == topics.LAYOUT:
-                time.sleep(LAYOUT_PAUSE)
-                start_wall += LAYOUT_PAUSE
+                start_wall += put_in_force(data)
+            else:
+                publishers[topic].publish(data)
+            published += 1
         time.sleep(quiet)          # the last outputs, and the node's verdict, come back
         report = None
         if recorder is not None:
@@ -197,6 +227,7 @@ class VerdictLog:
         """Subscribe ``node`` to /diagnostics."""
         from diagnostic_msgs.msg import DiagnosticArray
         self._by_digest = {}
+        self._statuses = {}        # statuses seen per layout digest (any level)
         self._lock = threading.Lock()
         node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_array, 50)
 
@@ -204,9 +235,16 @@ class VerdictLog:
         for status in array.status:
             values = {kv.key: kv.value for kv in status.values}
             digest = values.get('layout digest')
-            if digest and values.get('verdict level'):
+            if digest:
                 with self._lock:
-                    self._by_digest[digest] = values
+                    self._statuses[digest] = self._statuses.get(digest, 0) + 1
+                    if values.get('verdict level'):
+                        self._by_digest[digest] = values
+
+    def statuses(self, digest):
+        """How many statuses the node has published with layout ``digest`` in force."""
+        with self._lock:
+            return self._statuses.get(digest, 0)
 
     def latest(self):
         """{layout digest: diagnostics values}, in the order the layouts were first seen."""
