@@ -7,9 +7,9 @@ messages on ``keyphasor``: the node takes them with ``keyphasor_topic:=keyphasor
 as their raw bytes at their log times scaled by 1 / rate. After each layout the player pauses
 (bag time is then shifted) until the node says, on ``/diagnostics``, that it has that layout
 in force (its digest), so that the next sample is computed with it, as replay computes it;
-at least 50 ms, at most ``wait`` s (a layout the node refuses: then it says so and goes on). With ``-o`` the node's outputs (topics derived from the bag's
-layouts) are recorded to OUT by a ``cvc-balance record`` child process, for
-1 s after the last input. Samples start once the node subscribes to them, the
+at least 50 ms, at most ``wait`` s (a layout the node refuses: then it says so and goes
+on). With ``-o`` the node's outputs (topics derived from the bag's layouts) are recorded
+to OUT by a ``cvc-balance record`` child process, for 1 s after the last input. Samples start once the node subscribes to them, the
 recorder has matched the node's outputs, and 1.5 s more (DDS discovery is
 one-sided: the other end may match a moment later). Each wait says what it waits
 for and gives up after ``wait`` seconds with a :class:`PlayError` naming it.
@@ -44,7 +44,7 @@ class PlayError(RuntimeError):
 
 
 def layout_digest(text):
-    """The digest the node gives a layout on /diagnostics, or None if it is not a layout."""
+    """Return the digest the node gives a layout on /diagnostics (None: not a layout)."""
     from cvc_balance.physics.layout import LayoutError
     from cvc_balance.physics.layout_file import layout_from_text
     try:
