@@ -9,10 +9,11 @@ as their raw bytes at their log times scaled by 1 / rate. After each layout the 
 in force (its digest), so that the next sample is computed with it, as replay computes it;
 at least 50 ms, at most ``wait`` s (a layout the node refuses: then it says so and goes
 on). With ``-o`` the node's outputs (topics derived from the bag's layouts) are recorded
-to OUT by a ``cvc-balance record`` child process, for 1 s after the last input. Samples start once the node subscribes to them, the
-recorder has matched the node's outputs, and 1.5 s more (DDS discovery is
-one-sided: the other end may match a moment later). Each wait says what it waits
-for and gives up after ``wait`` seconds with a :class:`PlayError` naming it.
+to OUT by a ``cvc-balance record`` child process, until they have been quiet for 1 s after
+the last input (a node that fell behind answers its backlog first). Samples start once the
+node subscribes to them, the recorder has matched the node's outputs, and 1.5 s more (DDS
+discovery is one-sided: the other end may match a moment later). Each wait says what it
+waits for and gives up after ``wait`` seconds with a :class:`PlayError` naming it.
 
 While playing it listens to ``/diagnostics`` and, at the end, reports the node's
 own verdict per layout (the last status it published for each layout digest).
@@ -30,7 +31,7 @@ from cvc_balance.bag.rosbag2 import open_bag
 from cvc_balance.messages import topics
 from cvc_balance.messages.cdr import read_string_message
 from cvc_balance.physics.keyphasor import marks_summary
-from cvc_balance.ros.qos import input_qos, LAYOUT_QOS
+from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import message_class
 
 LAYOUT_PAUSE = 0.05
@@ -121,6 +122,7 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
     rclpy.init()
     node = rclpy.create_node('cvc_balance_player')
     verdicts = VerdictLog(node)
+    answers = AnswerClock(node, outputs[0])
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     spinner = threading.Thread(target=_spin, args=(executor,), daemon=True)
@@ -199,7 +201,12 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
             else:
                 publishers[topic].publish(data)
             published += 1
-        time.sleep(quiet)          # the last outputs, and the node's verdict, come back
+        # The last outputs, and the node's verdict, come back: a node that fell behind (a
+        # busy machine) answers its backlog first, so wait for its outputs to go quiet.
+        time.sleep(quiet)
+        if not _wait(lambda: time.monotonic() - answers.last >= quiet, wait):
+            say(f'play: the node still answered {wait:g} s after the last input; '
+                'recording stops', flush=True)
         report = None
         if recorder is not None:
             recorder.send_signal(signal.SIGINT)
@@ -218,6 +225,19 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
         spinner.join(timeout=5)
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+class AnswerClock:
+    """When the node last published an output (monotonic s): is it still answering?"""
+
+    def __init__(self, node, topic):
+        """Subscribe ``node`` to the output ``topic`` (raw: only the arrival counts)."""
+        self.last = time.monotonic()
+        node.create_subscription(message_class(topics.WRENCH_TYPE), topic, self._on_output,
+                                 OUTPUT_QOS, raw=True)
+
+    def _on_output(self, _):
+        self.last = time.monotonic()
 
 
 class VerdictLog:
