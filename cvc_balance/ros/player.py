@@ -4,16 +4,18 @@ Play a bag's inputs into the ROS graph with their timing, and record what comes 
 ``cvc-balance play BAG [--rate X] [-o OUT]``: layout messages go out latched
 (transient local), motion samples (joint_states, speed, or a keyphasor's
 messages on ``keyphasor``: the node takes them with ``keyphasor_topic:=keyphasor``)
-as their raw bytes at their log times scaled by 1 / rate. After each layout the player pauses
-(bag time is then shifted) until the node says, on ``/diagnostics``, that it has that layout
-in force (its digest), so that the next sample is computed with it, as replay computes it;
-at least 50 ms, at most ``wait`` s (a layout the node refuses: then it says so and goes
-on). With ``-o`` the node's outputs (topics derived from the bag's layouts) are recorded
-to OUT by a ``cvc-balance record`` child process, until they have been quiet for 1 s after
-the last input (a node that fell behind answers its backlog first). Samples start once the
-node subscribes to them, the recorder has matched the node's outputs, and 1.5 s more (DDS
-discovery is one-sided: the other end may match a moment later). Each wait says what it
-waits for and gives up after ``wait`` seconds with a :class:`PlayError` naming it.
+as their raw bytes at their log times scaled by 1 / rate (never in a burst: a player
+descheduled for more than 50 ms goes on from where it is, and says so). After each layout
+the player pauses (bag time is then shifted) until the node says, on ``/diagnostics``, that
+it has that layout in force (its digest), so that the next sample is computed with it, as
+replay computes it; at least 50 ms, at most ``wait`` s (a layout the node refuses: then it
+says so and goes on). With ``-o`` the node's outputs (topics derived from the bag's
+layouts) are recorded to OUT by a ``cvc-balance record`` child process, until they have
+been quiet for 1 s after the last input (a node that fell behind answers its backlog
+first). Samples start once the node subscribes to them, the recorder has matched the
+node's outputs, and 1.5 s more (DDS discovery is one-sided: the other end may match a
+moment later). Each wait says what it waits for and gives up after ``wait`` seconds with a
+:class:`PlayError` naming it.
 
 While playing it listens to ``/diagnostics`` and, at the end, reports the node's
 own verdict per layout (the last status it published for each layout digest).
@@ -34,6 +36,11 @@ from cvc_balance.physics.keyphasor import marks_summary
 from cvc_balance.ros.qos import input_qos, LAYOUT_QOS, OUTPUT_QOS
 from cvc_balance.ros.recorder import message_class
 
+MAX_LATE = 0.05
+"""Most (s) the player lets itself fall behind the bag's pace: later than that (the process
+was descheduled on a busy machine) it goes on from where it is, bag time shifted, rather
+than send the late messages at once: a burst of seconds of 1 kHz samples overflows the
+node's best-effort input queue (1000), and 637 of 6001 samples were lost that way."""
 LAYOUT_PAUSE = 0.05
 """Least pause (s) after a layout, and the whole pause for one the player cannot parse."""
 WAIT = 20.0
@@ -192,15 +199,22 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
         time.sleep(settle)
         published, start_log = first_sample, events[first_sample][0]
         start_wall = time.monotonic()
+        behind, paused = 0, 0.0
         for log_time, topic, data in events[first_sample:]:
             left = start_wall + (log_time - start_log) * 1e-9 / rate - time.monotonic()
             if left > 0:
                 time.sleep(left)
+            elif left < -MAX_LATE:          # descheduled: go on from here, no burst
+                behind, paused, start_wall = behind + 1, paused - left, start_wall - left
             if topic == topics.LAYOUT:
                 start_wall += put_in_force(data)
             else:
                 publishers[topic].publish(data)
             published += 1
+        if behind:
+            say(f"play: fell behind the bag's pace {behind} times (a busy machine?): paused "
+                f'{paused:.2f} s in all rather than send the late messages in a burst',
+                flush=True)
         # The last outputs, and the node's verdict, come back: a node that fell behind (a
         # busy machine) answers its backlog first, so wait for its outputs to go quiet.
         time.sleep(quiet)
