@@ -25,7 +25,6 @@ from cvc_balance.bag.mcap_reader import Bag, wrench_samples
 from cvc_balance.bag.replay import replay
 from ros_harness import NodeProcess, ros_environment
 
-pytestmark = pytest.mark.alone     # live equals offline to 4e-15: no other test beside it
 ROOT = Path(__file__).resolve().parents[1]
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 

@@ -20,7 +20,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-import pytest
 import yaml
 
 from cvc_balance.physics.layout import parse_layout
@@ -28,7 +27,6 @@ from ros_harness import Probe
 from test_balance_monitor import (diagnostic_values, joint_state, LAYOUT_A, start_node,
                                   wait_for_diagnostics, wait_until_connected)
 
-pytestmark = pytest.mark.alone     # samples lost under load: no other test beside them
 ROOT = Path(__file__).resolve().parents[1]
 BOMB = '\n'.join(['a0: &a0 [x, x, x, x, x, x, x, x, x]'] + [
     f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 9) + ']' for k in range(1, 10)])

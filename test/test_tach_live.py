@@ -311,8 +311,10 @@ def test_missed_and_doubled_marks_are_counted_by_the_node_as_by_replay(runs, tmp
 
 # -- play into the node's own process ---------------------------------------------------
 
-@pytest.mark.alone          # a node that falls behind loses tach samples
-@pytest.mark.parametrize('kind', ['time_reference', 'float64'])
+@pytest.mark.parametrize('kind', [
+    'time_reference',
+    # Stamped on receipt: a node descheduled by another test sees its marks late.
+    pytest.param('float64', marks=pytest.mark.alone)])
 def test_play_a_tach_bag_into_the_node(runs, kind, tmp_path):
     run, layout, bags, offline = runs
     node = NodeProcess('cvc_balance.ros.balance_monitor',
