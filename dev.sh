@@ -197,7 +197,12 @@ case "$cmd" in
       node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
       chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
       colcon_check
+      # colcon test has just run the lint and thesis tests: pytest runs the others.
+      set -- -k "not (lint or thesis)" "$@"
     fi
+    # The package's bytecode once, not in every process the tests start (this machine's
+    # PYTHONDONTWRITEBYTECODE=1 would have each compile it again).
+    in_venv python -m compileall -q "$here/cvc_balance" >/dev/null
     # One worker per core (CVC_TEST_WORKERS overrides); a file stays on one worker, in its
     # order, with its module fixtures made once. Each worker has its own ROS domain id.
     cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile "$@" ;;
