@@ -60,7 +60,7 @@ from cvc_balance.physics.motion import (AccelerationEstimator, AngleIntegrator,
 from cvc_balance.physics.plausibility import layout_warnings
 from cvc_balance.physics.unbalance import couple_unbalance, static_unbalance, unbalance_wrench
 from cvc_balance.ros.bearing_life import BearingLife, state_path
-from cvc_balance.ros.executor import spin
+from cvc_balance.ros.executor import init, spin
 from cvc_balance.ros.input_checks import InputChecks
 from cvc_balance.ros.keyphasor_input import KeyphasorInput
 from cvc_balance.ros.load_cells import LoadCells
@@ -899,7 +899,7 @@ def main(args=None):
               'after --ros-args; see --help)', file=sys.stderr)
         return 2
     try:
-        rclpy.init(args=argv)
+        init(args=argv)
     except Exception as error:      # rclpy's UnknownROSArgsError, RCLError: bad ROS arguments
         print(f'balance_monitor: error: bad ROS arguments: {error} (see --help)',
               file=sys.stderr)

@@ -6,13 +6,34 @@ rclpy's experimental EventsExecutor answers faster than the default executor (p5
 :func:`spin`).
 """
 
+import signal
+import threading
+
 import rclpy
 from rclpy.executors import ExternalShutdownException
+
+_stop = threading.Event()
+
+
+def init(args=None):
+    """
+    Start rclpy for a process that spins with :func:`spin`: SIGINT and SIGTERM stop it.
+
+    rclpy's own handlers let SIGINT raise KeyboardInterrupt wherever Python is: inside a
+    callback the events executor called from C++, the exception crosses C++ and the
+    process aborts (``terminate called after throwing an instance of
+    'pybind11::error_already_set'``; seen: exit code -6 for a node stopped right after a
+    big layout). Here a signal only sets a flag, and :func:`spin` stops between callbacks.
+    """
+    from rclpy.signals import SignalHandlerOptions
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: _stop.set())
 
 
 def spin(node, on_error=None):
     """
-    Spin ``node`` until the context shuts down (SIGINT, SIGTERM): the events executor.
+    Spin ``node`` until SIGINT or SIGTERM (:func:`init`) or the context shuts down.
 
     rclpy's experimental EventsExecutor answers faster than the default one; its
     spin() busy-waits holding the GIL in this rclpy (7.1), so it is driven by
@@ -29,7 +50,7 @@ def spin(node, on_error=None):
         executor = rclpy.executors.SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
-        while rclpy.ok(context=node.context):
+        while rclpy.ok(context=node.context) and not _stop.is_set():
             try:
                 executor.spin_once(timeout_sec=0.1)
             except (KeyboardInterrupt, ExternalShutdownException):

@@ -17,7 +17,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from cvc_balance.bag.machine import custom_data
 from cvc_balance.bag.rosbag2 import open_writer
 from cvc_balance.messages import topics
-from cvc_balance.ros.executor import spin
+from cvc_balance.ros.executor import init, spin
 
 DEFAULT_TOPICS = (topics.JOINT_STATES, topics.SPEED, topics.LAYOUT, *topics.OUTPUTS,
                   topics.support_load('*'), topics.measured_load('*'),
@@ -149,7 +149,7 @@ def record_main(args):
     """Run ``cvc-balance record``: record until SIGINT or SIGTERM; return the exit code."""
     import rclpy
 
-    rclpy.init(args=['cvc_balance_record', '--ros-args', *args.ros_args])
+    init(args=['cvc_balance_record', '--ros-args', *args.ros_args])
     node = rclpy.create_node('cvc_balance_recorder')
     recorder = BagRecorder(node, args.output, args.topics or DEFAULT_TOPICS,
                            '' if args.compression == 'none' else args.compression,
