@@ -205,7 +205,9 @@ case "$cmd" in
     in_venv python -m compileall -q "$here/cvc_balance" >/dev/null
     # One worker per core (CVC_TEST_WORKERS overrides); a file stays on one worker, in its
     # order, with its module fixtures made once. Each worker has its own ROS domain id.
-    cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile "$@" ;;
+    # Files longest first (test/file_costs.txt, conftest.py), not xdist's most-tests-first.
+    cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile \
+      --no-loadscope-reorder "$@" ;;
   run)
     setup
     in_venv "$@" ;;

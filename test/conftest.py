@@ -21,8 +21,30 @@ ALONE = _listed('alone_tests.txt')
 """Tests marked alone: under xdist no other test runs beside them (live timing)."""
 
 
+def _file_costs():
+    """Return {test file: seconds} of file_costs.txt (benchmarks/test_costs.py writes it)."""
+    costs = {}
+    for line in (Path(__file__).parent / 'file_costs.txt').read_text().splitlines():
+        if line.strip() and not line.startswith('#'):
+            seconds, name = line.split()
+            costs[name] = float(seconds)
+    return costs
+
+
+COSTS = _file_costs()
+"""Seconds each file took in a measured run: the longest files run first."""
+
+
 def pytest_collection_modifyitems(config, items):
-    """Mark each test named in slow_tests.txt slow, in alone_tests.txt alone (a file: all)."""
+    """
+    Order the files longest first; mark tests slow and alone by their lists.
+
+    Longest first: with ``./dev.sh test``'s workers (``--no-loadscope-reorder``: files
+    in this order) the long files start early and the workers end together. A file not
+    in file_costs.txt comes after those listed; a file's own tests keep their order.
+    Then each test named in slow_tests.txt is marked slow, in alone_tests.txt alone.
+    """
+    items.sort(key=lambda item: -COSTS.get(f'{item.path.parent.name}/{item.path.name}', 0.0))
     for item in items:
         file = f'{item.path.parent.name}/{item.path.name}'
         for listed, mark in ((SLOW, pytest.mark.slow), (ALONE, pytest.mark.alone)):
