@@ -400,8 +400,8 @@ class _Model:
         if self.stack_rows is not None:
             constraints.append(self.stack_rows)
         return optimize.milp(cost, integrality=self.integrality, bounds=self.bounds,
-                    constraints=constraints,
-                    options={'time_limit': time_limit, 'mip_rel_gap': mip_gap})
+                             constraints=constraints,
+                             options={'time_limit': time_limit, 'mip_rel_gap': mip_gap})
 
     def failed(self, result):
         status = 'infeasible' if result.status == 2 else 'time limit'

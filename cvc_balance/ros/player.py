@@ -242,7 +242,7 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
 
 
 class AnswerClock:
-    """When the node last published an output (monotonic s): is it still answering?"""
+    """When the node last published an output (monotonic s): whether it still answers."""
 
     def __init__(self, node, topic):
         """Subscribe ``node`` to the output ``topic`` (raw: only the arrival counts)."""
