@@ -11,6 +11,7 @@ node's drive torque implies: replay and node could share a mistake, Pinocchio do
 """
 
 import math
+import re
 from pathlib import Path
 import signal
 import subprocess
@@ -233,3 +234,68 @@ def test_bad_stamps_and_a_pause_are_judged_alike_live_and_offline(tmp_path):
     for topic, (stamps, _) in expected.items():
         assert stamps.tolist() == good, topic
     assert_same_outputs(got, expected)
+
+
+def slow_shift_bag(path, points=20_000):
+    """
+    Write tilted_shift with its last layout (the counterweight's slip) slow to parse.
+
+    The layout gets ``points`` point masses of a gram more: about 1.5 s to parse here,
+    three times the bag's 0.5 s left after it. Returns the path.
+    """
+    import yaml
+    from cvc_balance.bag.mcap_writer import BagWriter
+    from cvc_balance.messages.cdr import read_string_message, string_message
+    from tach_bags import copy_channels
+    source = ROOT / 'bags' / 'tilted_shift.mcap'
+    bag = Bag(source)
+    layouts = bag.messages(bag.channel('/layout', 'std_msgs/msg/String'))
+    shifted = yaml.safe_load(read_string_message(layouts[-1][1]))
+    shifted['components'] += [{'name': f'gram_{i}', 'mass': 1e-3, 'radius': 0.5,
+                               'angle': (i * 2.399963) % 6.283, 'z': (i % 11 - 5) * 0.01}
+                              for i in range(points)]
+    layouts[-1] = (layouts[-1][0], string_message(yaml.safe_dump(shifted)))
+    with BagWriter(path) as writer:
+        copy_channels(writer, source, leave_out=('/layout',))
+        channel = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
+        for log_time, data in layouts:
+            writer.write(channel, log_time, data)
+    return path
+
+
+def test_a_slow_layout_and_a_stalled_player_change_no_output(tmp_path):
+    """
+    A layout slow to parse and a player stopped for 1.5 s: live still equals replay.
+
+    play waits until the node has each layout in force (before: 50 ms, and the node
+    computed the samples meanwhile with the old layout: 99.6 N apart on /bearing_load,
+    seen under load). A player descheduled goes on from where it is (before: it sent the
+    1500 late samples at once, more than the node's input queue of 1000 holds).
+    """
+    bag = slow_shift_bag(tmp_path / 'slow_shift.mcap')
+    node = NodeProcess('cvc_balance.ros.balance_monitor', [], tmp_path / 'node.log')
+    live = tmp_path / 'live.mcap'
+    player = subprocess.Popen([sys.executable, '-m', 'cvc_balance.cli', 'play', str(bag), '-o',
+                               str(live), '--wait', '60'], env=ros_environment(),
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    from geometry_msgs.msg import WrenchStamped
+    from ros_harness import Probe
+    probe = Probe('stall_probe')
+    try:           # a second into the samples (the node answers them), stop the player
+        answers = probe.record(WrenchStamped, 'bearing_load')
+        assert probe.spin_until(lambda: len(answers) > 0, timeout=60.0), node.log()
+        probe.spin_for(1.0)
+        player.send_signal(signal.SIGSTOP)
+        probe.spin_for(1.5)
+        player.send_signal(signal.SIGCONT)
+    finally:
+        probe.close()
+    said, err = player.communicate(timeout=180)
+    assert player.returncode == 0, err
+    assert node.stop(signal.SIGINT) == 0
+    behind = re.search(r"^play: fell behind the bag's pace \d+ times? \(a busy machine\?\): "
+                       r'paused (\d+\.\d+) s in all', said, re.M)
+    assert behind and float(behind[1]) >= 1.4, said
+    summary = replay(bag, tmp_path / 'offline.mcap')
+    assert f'{summary.accepted} accepted, 0 rejected, 0 dropped' in node.log(), node.log()
+    assert_same_outputs(outputs(live), outputs(tmp_path / 'offline.mcap'))

@@ -51,31 +51,30 @@ class PlayError(RuntimeError):
     """Nothing to play into (no node, no recorder); ``str()`` says what was waited for."""
 
 
-def layout_digest(text):
-    """Return the digest the node gives a layout on /diagnostics (None: not a layout)."""
+def parsed_layouts(layout_texts):
+    """
+    Return ({text: its digest, None if it is no layout}, the node's output topics for them).
+
+    The digest is the one the node names on /diagnostics for the layout in force; the
+    topics are the node's outputs with each layout's supports. Each text is parsed once.
+    """
     from cvc_balance.physics.layout import LayoutError
     from cvc_balance.physics.layout_file import layout_from_text
-    try:
-        return layout_from_text(text).digest()
-    except LayoutError:
-        return None
-
-
-def output_topics(layout_texts):
-    """Output topics of the node for the layouts a bag holds (their supports)."""
-    from cvc_balance.physics.layout import LayoutError
-    from cvc_balance.physics.layout_file import layout_from_text
-    names = list(topics.OUTPUTS)
+    digests, names = {}, list(topics.OUTPUTS)
     for text in layout_texts:
+        if text in digests:
+            continue
         try:
             layout = layout_from_text(text)
         except LayoutError:
+            digests[text] = None
             continue
+        digests[text] = layout.digest()
         for support in layout.supports:
             topic = topics.support_load(support.name)
             if topic not in names:
                 names.append(topic)
-    return names
+    return digests, names
 
 
 def cell_channels(bag):
@@ -123,7 +122,7 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
         say(f'play: {bag_path}: {problem}')
     layouts = [data for topic, _, _, messages in inputs if topic == topics.LAYOUT
                for _, data in messages]
-    outputs = output_topics([read_string_message(data) for data in layouts])
+    digests, outputs = parsed_layouts([read_string_message(data) for data in layouts])
     if any(topic.endswith(topics.MEASURED_LOAD) for topic, *_ in inputs):
         outputs += [topics.IDENTIFIED_UNBALANCE, topics.UNBALANCE_RESIDUAL]
     rclpy.init()
@@ -166,20 +165,10 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
                 stdout=subprocess.PIPE, text=True)
         first_sample = next(i for i, (_, topic, _) in enumerate(events)
                             if topic != topics.LAYOUT)
-        digests = {}
 
         def put_in_force(data):
-            """Publish a layout; wait until the node has it in force; return the s waited."""
-            if data not in digests:
-                digests[data] = layout_digest(read_string_message(data))
-            digest, seen = digests[data], verdicts.statuses(digests[data])
-            started = time.monotonic()
-            publishers[topics.LAYOUT].publish(data)
-            time.sleep(LAYOUT_PAUSE)
-            if digest is not None and not _wait(lambda: verdicts.statuses(digest) > seen, wait):
-                say(f'play: the node did not put layout {digest} in force within {wait:g} s '
-                    '(refused? see its log); playing on', flush=True)
-            return time.monotonic() - started
+            return _put_in_force(publishers[topics.LAYOUT], data,
+                                 digests[read_string_message(data)], verdicts, wait, say)
 
         for log_time, topic, data in events[:first_sample]:
             if topic == topics.LAYOUT:                # the layouts in force from the start
@@ -212,9 +201,9 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
                 publishers[topic].publish(data)
             published += 1
         if behind:
-            say(f"play: fell behind the bag's pace {behind} times (a busy machine?): paused "
-                f'{paused:.2f} s in all rather than send the late messages in a burst',
-                flush=True)
+            say(f"play: fell behind the bag's pace {behind} time{'s' if behind > 1 else ''} "
+                f'(a busy machine?): paused {paused:.2f} s in all rather than send the late '
+                'messages in a burst', flush=True)
         # The last outputs, and the node's verdict, come back: a node that fell behind (a
         # busy machine) answers its backlog first, so wait for its outputs to go quiet.
         time.sleep(quiet)
@@ -239,6 +228,25 @@ def play(bag_path, rate=1.0, output=None, wait=WAIT, quiet=1.0, settle=1.5, say=
         spinner.join(timeout=5)
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def _put_in_force(publisher, data, digest, verdicts, wait, say):
+    """
+    Publish a layout; wait until the node has it in force; return the seconds it took.
+
+    ``digest``: the layout's (None: it is no layout, the node will refuse it: then only
+    LAYOUT_PAUSE). In force: the node published a /diagnostics status with that digest
+    after this layout went out (a layout equal to the one in force too: it is put in
+    force again). At most ``wait`` s, then it says so and goes on.
+    """
+    seen = verdicts.statuses(digest)
+    started = time.monotonic()
+    publisher.publish(data)
+    time.sleep(LAYOUT_PAUSE)
+    if digest is not None and not _wait(lambda: verdicts.statuses(digest) > seen, wait):
+        say(f'play: the node did not put layout {digest} in force within {wait:g} s '
+            '(refused? see its log); playing on', flush=True)
+    return time.monotonic() - started
 
 
 class AnswerClock:
