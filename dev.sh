@@ -196,8 +196,10 @@ case "$cmd" in
       vulkan || echo "dev.sh: the viewer's rendering test will be skipped" >&2
       node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
       chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
-      colcon_check
-      # colcon test has just run the lint and thesis tests: pytest runs the others.
+      # colcon build and test (lint, thesis) beside pytest, which runs the other tests; the
+      # run fails if either does.
+      colcon_check &
+      colcon=$!
       set -- -k "not (lint or thesis)" "$@"
     fi
     # The package's bytecode once, not in every process the tests start (this machine's
@@ -206,8 +208,13 @@ case "$cmd" in
     # One worker per core (CVC_TEST_WORKERS overrides); a file stays on one worker, in its
     # order, with its module fixtures made once. Each worker has its own ROS domain id.
     # Files longest first (test/file_costs.txt, conftest.py), not xdist's most-tests-first.
-    cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile \
-      --no-loadscope-reorder "$@" ;;
+    status=0
+    (cd "$here" && in_venv python -m pytest -n "${CVC_TEST_WORKERS:-auto}" --dist loadfile \
+      --no-loadscope-reorder "$@") || status=$?
+    if [ -n "${colcon:-}" ]; then
+      wait "$colcon" || status=1
+    fi
+    exit "$status" ;;
   run)
     setup
     in_venv "$@" ;;
