@@ -319,5 +319,108 @@ def test_a_stretch_stops_at_a_gap_and_its_spread_is_its_worst_mark():
 
 def test_the_longest_run():
     for mask, want in (([1, 1, 0, 1, 1, 1, 0], (3, 6)), ([0, 1, 0, 0, 1, 1], (4, 6)),
-                       ([1, 1, 1], (0, 3)), ([0, 1], (1, 2))):
+                       ([1, 1, 1], (0, 3)), ([0, 1], (1, 2)),
+                       ([1, 1, 1, 0, 1], (0, 3)), ([1, 0, 1, 1, 0, 1, 1], (2, 4))):
         assert _longest_run(np.array(mask, bool)) == want
+
+
+def test_a_run_of_one_period_between_gaps_has_its_periods_speed_at_both_marks():
+    t = ramp_marks(7)
+    # Runs: marks 0-1, 2-3 (one period, not the first run), 4-6.
+    speed = Marks(t, np.array([True, False, True, False, True, True]), 7).mark_speed()
+    for k in (0, 2):
+        assert speed[k] == speed[k + 1] == pytest.approx(TWO_PI / (t[k + 1] - t[k]), rel=1e-15)
+
+
+# -- steady stretches of given mark speeds ------------------------------------------------
+
+class GivenSpeeds:
+    """Marks whose speeds at the marks are given (all that steady_stretches reads of them)."""
+
+    def __init__(self, speed, good, time):
+        self.speed, self.good, self.time = np.array(speed, float), np.array(good, bool), time
+
+    def mark_speed(self, span):
+        """Return the given speeds, whatever the span."""
+        return self.speed.copy()
+
+
+def stretches_by_hand(speed, good, time, tolerance, least):
+    """
+    Steady stretches as the description defines them, one start at a time, in plain Python.
+
+    From each start (a finite speed, its period good), the marks while the periods stay
+    good, the speeds finite and max - min <= tolerance (max + min); kept when that is at
+    least ``least`` revolutions, then cut to its first longest run within tolerance x its
+    median of that median, kept again if still ``least``; the next start is the kept
+    stretch's last mark (or the next mark).
+    """
+    found, i, n = [], 0, len(speed)
+    while i < n - 1:
+        j = i
+        while j + 1 < n and good[j] and math.isfinite(speed[j + 1]):
+            part = speed[i:j + 2]
+            if max(part) - min(part) > tolerance * (max(part) + min(part)):
+                break
+            j += 1
+        if not (math.isfinite(speed[i]) and good[i]) or j - i < least:
+            i += 1
+            continue
+        part = list(speed[i:j + 1])
+        middle = sorted(part)[len(part) // 2] if len(part) % 2 else \
+            0.5 * (sorted(part)[len(part) // 2 - 1] + sorted(part)[len(part) // 2])
+        best, start = (0, 0), None
+        for k, value in enumerate(part + [math.inf]):
+            if abs(value - middle) <= tolerance * middle:
+                start = k if start is None else start
+            elif start is not None:
+                best = max(best, (k - start, -start))
+                start = None
+        first, last = i - best[1], i - best[1] + best[0] - 1
+        if last - first >= least:
+            mean = TWO_PI * (last - first) / (time[last] - time[first])
+            found.append((first, last, mean, max(abs(s - mean) for s in speed[first:last + 1])
+                          / mean))
+        i = max(last, i + 1)
+    return found
+
+
+def test_stretches_on_the_bounds_by_hand():
+    """Tolerance 1/4, speeds of a few binary fractions: both bounds met exactly."""
+    time = np.arange(9.0) * math.pi      # 2 pi 8 / 8 pi: a mean speed of 2
+    # 1.5 and 2.5: the range 1 is 1/4 of 1.5 + 2.5 exactly; the median 2 and 2.5 - 2 = 2 / 4.
+    (stretch,) = steady_stretches(GivenSpeeds([2.0] * 7 + [1.5, 2.5], [True] * 8, time),
+                                  tolerance=0.25)
+    assert (stretch.first, stretch.last, stretch.revolutions) == (0, 8, 8)
+    assert stretch.speed == pytest.approx(2.0, rel=1e-15)
+    assert stretch.spread == pytest.approx(0.25, rel=1e-15)      # 1.5 and 2.5 are 1/2 off
+    # A stretch of one revolution at the very end; after a short one, the next start.
+    ends = GivenSpeeds([1.0, 1.0, 9.0, 9.0], [True] * 3, np.arange(4.0))
+    assert [(s.first, s.last) for s in steady_stretches(ends, 0.25, 1)] == [(0, 1), (2, 3)]
+    late = GivenSpeeds([1.0, 9.0, 9.0, 9.0], [True] * 3, np.arange(4.0))
+    assert [(s.first, s.last) for s in steady_stretches(late, 0.25, 2)] == [(1, 3)]
+
+
+def test_stretches_of_random_speeds_as_defined():
+    """Speeds drawn from a few binary fractions (ties on both bounds), gaps, lone marks."""
+    rng = np.random.default_rng(29)
+    levels = np.array([3.0, 3.5, 4.0, 4.5, 5.0, 6.0])
+    checked = 0
+    for case in range(120):
+        n = int(rng.integers(2, 40))
+        good = rng.random(n - 1) < 0.9
+        # A speed drifts from level to level, or steps; NaN where a mark has no good period.
+        speed = levels[np.clip(np.cumsum(rng.integers(-1, 2, n)) + 2, 0, 5)]
+        lone = ~np.concatenate([[False], good]) & ~np.concatenate([good, [False]])
+        speed[lone] = np.nan
+        time = np.cumsum(rng.uniform(0.5, 1.5, n))
+        tolerance, least = [0.25, 0.125, 0.0625][case % 3], int(rng.integers(1, 6))
+        got = steady_stretches(GivenSpeeds(speed, good, time), tolerance, least)
+        want = stretches_by_hand(speed.tolist(), good.tolist(), time, tolerance, least)
+        assert [(s.first, s.last) for s in got] == [w[:2] for w in want], case
+        for s, (first, last, mean, spread) in zip(got, want):
+            assert (s.start, s.end, s.revolutions) == (time[first], time[last], last - first)
+            assert s.speed == pytest.approx(mean, rel=1e-15)
+            assert s.spread == pytest.approx(spread, rel=1e-12, abs=1e-15)
+        checked += len(want)
+    assert checked > 100
