@@ -446,7 +446,7 @@ def live_speeds(times, resolution=None, **options):
 
 
 def least_squares_speed(times, first, k):
-    """Slope at mark k of numpy's least-squares quadratic (a line for two) through marks first..k."""
+    """Slope at mark k of numpy's least-squares quadratic (a line for two), marks first..k."""
     x = np.asarray(times[first:k + 1]) - times[k]
     return np.polyfit(x, TWO_PI * np.arange(first - k, 1), 2 if k - first >= 2 else 1)[-2]
 
@@ -538,3 +538,144 @@ def test_a_fast_ramp_is_followed_with_a_tight_tolerance():
     assert (marks.missed, marks.doubled, marks.irregular, marks.revolutions) == (0, 0, 0, 39)
     for k in range(2, 40):
         assert speed[times[k]] == pytest.approx(omega + alpha * times[k], rel=1e-9), k
+
+
+# -- the marks, live: which marks are taken ----------------------------------------------------
+
+def test_a_mark_not_after_the_newest_is_left_out_in_every_state():
+    marks = LiveMarks()
+    assert marks.mark(0.0) == [] and marks.mark(0.0) is None and marks.mark(-1.0) is None
+    assert marks.found == 1                                          # learning
+    for time in (0.1, 0.2, 0.3):
+        marks.mark(time)
+    assert marks.ready and marks.found == 4
+    assert marks.mark(0.3) is None and marks.found == 4             # the newest good mark
+    assert marks.mark(0.34) == [] and marks.found == 5              # short: held
+    assert marks.mark(0.34) is None and marks.mark(0.32) is None    # not after the held one
+    assert marks.found == 5
+    (period,) = marks.mark(0.4)
+    assert period[:2] == (0.3, 0.4) and (marks.found, marks.doubled) == (6, 1)
+
+
+def test_a_short_period_not_followed_by_one_revolution_starts_again_from_its_mark():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3):
+        marks.mark(time)
+    assert marks.mark(0.45) == [] and marks.irregular == 1          # 1.5 turns: irregular
+    for time in (0.55, 0.65, 0.75):
+        marks.mark(time)
+    assert marks.ready
+    assert marks.mark(0.79) == []                                   # short: held
+    assert marks.mark(0.9) == [] and marks.irregular == 2           # 1.5 turns from 0.75
+    assert not marks.ready
+    assert marks.motion_at(0.95) == 'keyphasor: learning the period (2 marks of 4)'
+    assert marks.mark(1.01) == []
+    periods = marks.mark(1.12)
+    assert [p[:2] for p in periods] == [(0.79, 0.9), (0.9, 1.01), (1.01, 1.12)]
+    assert marks.mark(1.28) == [] and marks.irregular == 3          # 1.45 turns
+
+
+def test_learning_takes_three_periods_each_within_the_tolerance_of_the_one_before():
+    # 1, 1.3, 1.1: the second is 30 % longer than the first.
+    marks = LiveMarks()
+    for time in (0.0, 1.0, 2.3, 3.4):
+        marks.mark(time)
+    assert not marks.ready and marks.irregular == 1
+    # 1, 1.1, 1.3: each within 20 % of the one before (1.3 / 1.1 = 1.18).
+    marks = LiveMarks()
+    for time in (0.0, 1.0, 2.1, 3.4):
+        marks.mark(time)
+    assert marks.ready and marks.irregular == 0 and marks.revolutions == 3
+    # Tolerance 1/4: 1.25 after 1 is within it, exactly.
+    marks = LiveMarks(tolerance=0.25)
+    for time in (0.0, 1.0, 2.25, 3.5625):
+        marks.mark(time)
+    assert marks.ready and marks.irregular == 0
+
+
+def test_the_angle_is_given_until_three_periods_and_the_tolerance_without_a_mark():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3):
+        marks.mark(time)
+    for periods in (1.5, 3.0):
+        angle, omega = marks.motion_at(0.3 + 0.1 * periods)
+        assert angle == pytest.approx(TWO_PI * periods, rel=1e-12)
+        assert omega == pytest.approx(TWO_PI / 0.1, rel=1e-12)
+    assert marks.motion_at(0.3 + 0.1 * 3.25) == 'keyphasor: no mark for 0.325 s (the rotor ' \
+        'stopped?)'
+
+
+def test_the_time_of_some_turns_from_a_mark_by_hand():
+    # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
+    assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
+        (-TWO_PI + math.sqrt(TWO_PI ** 2 + 8 * math.pi)) / 2.0, rel=1e-15)
+    assert _turn_time(TWO_PI, 0.0, 3, None) == pytest.approx(3.0, rel=1e-15)
+    # Stopping first (4 pi^2 - 2 x 4 x 4 pi < 0), or not turning forward: the value given.
+    assert _turn_time(TWO_PI, -4.0, 2, 'x') == 'x'
+    assert _turn_time(0.0, 1.0, 1, 'x') == 'x' and _turn_time(-1.0, 5.0, 1, 'x') == 'x'
+
+
+# -- a sampled tach, live ------------------------------------------------------------------
+
+def warmed_up(signal, levels=(0.0, 8.0)):
+    """Feed the 256 samples the levels are first judged over (half low, half high); t < 0."""
+    for k in range(256):
+        signal.sample(-1.0 + k / 1024.0, levels[k % 2])
+    return signal
+
+
+def test_live_crossings_by_hand():
+    """Levels 0 and 8, threshold 4, band 1/8 x 8 = 1 (every figure exact in binary)."""
+    tach = warmed_up(LiveSignal(hysteresis=0.125))
+    assert (tach.levels, tach.threshold, tach.band) == ((0.0, 8.0), 4.0, 1.0)
+    # Below the band, then up through the threshold (3 -> 6 between t 1 and 2: at 1 1/3);
+    # the mark is said by the first sample beyond the band.
+    said = [tach.sample(t, v) for t, v in ((0.0, 2.0), (1.0, 3.0), (2.0, 4.5), (3.0, 6.0))]
+    assert said == [None, None, None, 1.0 + 1.0 / 1.5] and tach.spacing == 1.0
+    # Exactly on the band's edge (5) is not beyond it; a sample exactly on the threshold is
+    # where the crossing is.
+    said = [tach.sample(t, v) for t, v in ((4.0, 2.0), (5.0, 4.0), (6.0, 5.0), (7.0, 5.5))]
+    assert said == [None, None, None, 5.0]
+    # Timed between the last sample below and the next, whatever follows inside the band.
+    said = [tach.sample(t, v) for t, v in ((8.0, 2.0), (9.0, 4.5), (10.0, 4.0), (11.0, 6.0),
+                                           (11.5, 6.0))]
+    assert said == [None, None, None, 8.0 + 2.0 / 2.5, None] and tach.spacing == 0.5
+    # Falling: the same levels, the crossing from above; 3.25 is inside the band.
+    falling = warmed_up(LiveSignal('falling', hysteresis=0.125))
+    said = [falling.sample(t, v) for t, v in ((0.0, 6.0), (1.0, 4.5), (2.0, 3.25),
+                                              (3.0, 2.5))]
+    assert said == [None, None, None, 1.4]
+    given = warmed_up(LiveSignal(threshold=2.0, hysteresis=0.125))
+    said = [given.sample(t, v) for t, v in ((0.0, 0.5), (1.0, 2.5), (2.0, 3.5))]
+    assert given.threshold == 2.0 and said == [None, None, 0.75]
+
+
+def test_live_levels_are_judged_at_256_512_1024_samples_then_over_the_latest_4096():
+    tach = LiveSignal()
+    assert tach.levels is None
+    for k in range(255):
+        tach.sample(k, math.nan)                # not counted
+        tach.sample(k + 0.5, 1.0 if k % 2 else 0.0)
+    assert tach.levels is None and tach.threshold is None
+    tach.sample(300.0, 1.0)
+    assert tach.levels == (0.0, 1.0)            # the 256th sample
+    for k in range(255):
+        tach.sample(301.0 + k, 3.0 if k % 2 else 0.0)
+    assert tach.levels == (0.0, 1.0)
+    tach.sample(556.0, 3.0)                     # the 512th: 0 below 1.5; 128 3's above
+    assert tach.levels == (0.0, 3.0)
+    highs = iter([1.0, 1.5] * 4096)
+    values = [next(highs) if k % 2 else 0.0 for k in range(8192 - 512)]
+    for k, value in enumerate(values[:-1]):
+        tach.sample(557.0 + k, value)
+    # Judged last at the 4096th sample, over all: 3 is the top, 1.5 the middle.
+    assert tach.levels == (0.0, 3.0)
+    tach.sample(10000.0, values[-1])
+    # The 8192nd: over the latest 4096 only (1's and 1.5's: the 3's are gone).
+    assert tach.levels == (0.0, 1.25)
+    for text, kwargs in (("keyphasor edge must be rising or falling, got 'up'", {'edge': 'up'}),
+                         ('keyphasor threshold must be finite, got inf',
+                          {'threshold': math.inf})):
+        with pytest.raises(ValueError) as caught:
+            LiveSignal(**kwargs)
+        assert str(caught.value) == text
