@@ -610,6 +610,9 @@ def test_the_time_of_some_turns_from_a_mark_by_hand():
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
         (-TWO_PI + math.sqrt(TWO_PI ** 2 + 8 * math.pi)) / 2.0, rel=1e-15)
     assert _turn_time(TWO_PI, 0.0, 3, None) == pytest.approx(3.0, rel=1e-15)
+    assert _turn_time(0.5, 0.0, 1, None) == pytest.approx(4.0 * math.pi, rel=1e-15)
+    # Stopping exactly at the turn (4 pi^2 - 2 pi 2 pi = 0): it never passes it.
+    assert _turn_time(TWO_PI, -math.pi, 1, 'x') == 'x'
     # Stopping first (4 pi^2 - 2 x 4 x 4 pi < 0), or not turning forward: the value given.
     assert _turn_time(TWO_PI, -4.0, 2, 'x') == 'x'
     assert _turn_time(0.0, 1.0, 1, 'x') == 'x' and _turn_time(-1.0, 5.0, 1, 'x') == 'x'
@@ -679,3 +682,11 @@ def test_live_levels_are_judged_at_256_512_1024_samples_then_over_the_latest_409
         with pytest.raises(ValueError) as caught:
             LiveSignal(**kwargs)
         assert str(caught.value) == text
+
+
+def test_a_sample_on_the_threshold_after_the_crossing_is_not_below_it():
+    """Threshold 4 (levels 0, 8; band 1): -4, +0.5, 0, +4: the crossing is between the first."""
+    t = np.arange(8.0)
+    values = np.array([0.0, 0.0, 4.5, 4.0, 8.0, 8.0, 0.0, 0.0])
+    assert signal_marks(t, values, threshold=4.0, hysteresis=0.125).tolist() == \
+        [1.0 + 4.0 / 4.5]
