@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from cvc_balance.physics.keyphasor import (_longest_run, _neighbours_median, _turn_time,
-                                           checked_marks, LiveMarks, LiveSignal, Marks,
+                                           checked_marks, fit_at_zero, LiveMarks,
+                                           LiveSignal, Marks,
                                            marks_summary, signal_levels, signal_marks,
                                            steady_stretches)
 
@@ -690,3 +691,72 @@ def test_a_sample_on_the_threshold_after_the_crossing_is_not_below_it():
     values = np.array([0.0, 0.0, 4.5, 4.0, 8.0, 8.0, 0.0, 0.0])
     assert signal_marks(t, values, threshold=4.0, hysteresis=0.125).tolist() == \
         [1.0 + 4.0 / 4.5]
+
+
+# -- the fitted speed at each mark, against numpy's least squares ----------------------------
+
+def fitted_by_numpy(time, good, k, span):
+    """
+    The fitted speed at mark k as Marks.fitted_speed defines it, by numpy's polyfit.
+
+    The marks of ``span`` revolutions of its run of good periods, centred on it where the
+    run allows (else the run's first or last ``span``; all of a shorter run); NaN alone.
+    """
+    first = k
+    while first > 0 and good[first - 1]:
+        first -= 1
+    last = k
+    while last < len(good) and good[last]:
+        last += 1
+    width = min(last - first, span)
+    if width == 0:
+        return math.nan
+    lo = min(max(k - width // 2, first), last - width)
+    x = time[lo:lo + width + 1] - time[k]
+    return np.polyfit(x, TWO_PI * (np.arange(lo, lo + width + 1) - k),
+                      2 if width >= 2 else 1)[-2]
+
+
+@pytest.mark.parametrize('span', [8, 3, 2, 1])
+def test_fitted_speeds_of_jittered_marks_with_gaps(span):
+    rng = np.random.default_rng(span)
+    time = np.cumsum(rng.uniform(0.09, 0.11, 60))
+    good = np.ones(59, bool)
+    good[[5, 6, 20, 30, 31, 33, 50]] = False        # runs of 5, 13, 9, 1, 16, 8 periods...
+    speed = Marks(time, good, 60).fitted_speed(span)
+    for k in range(60):
+        want = fitted_by_numpy(time, good, k, span)
+        if math.isnan(want):
+            assert math.isnan(speed[k]), k
+        else:
+            assert speed[k] == pytest.approx(want, rel=1e-10), k
+    assert math.isnan(speed[6]) and math.isnan(speed[31])     # alone between two gaps
+    assert np.isnan(Marks(time[:1], good[:0], 1).fitted_speed(span)).tolist() == [True]
+
+
+def test_fit_at_zero_against_numpy_row_by_row():
+    rng = np.random.default_rng(5)
+    offsets = rng.uniform(-2.0, 1.0, (7, 30))
+    turns = rng.normal(size=(7, 30))
+    valid = rng.random((7, 30)) < 0.6
+    valid[:, :4] = [[True] * 4, [True] * 4] + [[False] * 4] * 5     # two points each
+    valid[:, 4:6] = [[True] * 2] + [[False] * 2] * 6                 # one point
+    valid[:, 6] = False                                              # none
+    value, slope, second = fit_at_zero(offsets, turns, valid)
+    for row in range(30):
+        used = valid[:, row]
+        if used.sum() < 2:
+            assert math.isnan(value[row]) and math.isnan(slope[row]), row
+            assert math.isnan(second[row]), row
+            continue
+        degree = 2 if used.sum() >= 3 else 1
+        fit = np.polyfit(offsets[used, row], turns[used, row], degree)[::-1]
+        want = (fit[0], fit[1], 2.0 * fit[2] if degree == 2 else 0.0)
+        got = (value[row], slope[row], second[row])
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), row
+    # Without a mask every point counts; the turns given once for all rows.
+    value, slope, second = fit_at_zero(offsets, turns[:, 0])
+    for row in (0, 17):
+        fit = np.polyfit(offsets[:, row], turns[:, 0], 2)[::-1]
+        assert (value[row], slope[row], second[row]) == pytest.approx(
+            (fit[0], fit[1], 2.0 * fit[2]), rel=1e-9)
