@@ -760,3 +760,39 @@ def test_fit_at_zero_against_numpy_row_by_row():
         fit = np.polyfit(offsets[:, row], turns[:, 0], 2)[::-1]
         assert (value[row], slope[row], second[row]) == pytest.approx(
             (fit[0], fit[1], 2.0 * fit[2]), rel=1e-9)
+
+
+def test_motion_between_jittered_marks_is_the_hermite_cubic_of_their_fitted_speeds():
+    """Jittered marks (the cubic's third-order term is not 0 there), a gap; any sample order."""
+    rng = np.random.default_rng(17)
+    time = np.cumsum(rng.uniform(0.09, 0.11, 14))
+    good = np.ones(13, bool)
+    good[6] = False
+    marks = Marks(time, good, 14)
+    speed = [fitted_by_numpy(time, good, k, 8) for k in range(14)]
+    where = [(k, share) for k in (0, 3, 5, 7, 12) for share in (0.0, 0.3, 0.8)] + [(12, 1.0)]
+    at = np.array([time[k] + share * (time[k + 1] - time[k]) for k, share in where])
+    for order in (np.arange(len(at)), np.arange(len(at))[::-1], rng.permutation(len(at))):
+        angle, omega, alpha = marks.motion(at[order])
+        for n, (k, share) in enumerate(where[i] for i in order):
+            want = hermite_by_hand(time, speed, k, share)
+            assert (angle[n], omega[n], alpha[n]) == pytest.approx(want, rel=1e-9, abs=1e-9), \
+                (k, share)
+    first_smallest = np.array([0, 5, 2, 3])      # the first is the earliest, the rest not sorted
+    angle, omega, alpha = marks.motion(at[first_smallest])
+    for n, i in enumerate(first_smallest):
+        assert angle[n] == pytest.approx(hermite_by_hand(time, speed, *where[i])[0], abs=1e-9)
+    no_alpha = marks.motion(at, acceleration=False)
+    assert no_alpha[2] is None and np.array_equal(no_alpha[1], marks.motion(at)[1])
+
+
+def test_a_doubled_mark_among_four_and_on_a_slow_rotor():
+    """
+    Periods 0.1, 1.2, 1.3: the neighbours' medians (ends reflected) 1.25, 1.2, 0.65; the first
+    is short and with the next makes 1.3, within 20 % of min(1.25, 1.2): an extra mark.
+    """
+    marks = checked_marks([0.0, 0.1, 1.3, 2.6])
+    assert marks.time.tolist() == [0.0, 1.3, 2.6] and marks.doubled == 1
+    # A turn of 2 s split 1.2 + 0.8: short is against 0.8 x the usual period (1.6 s).
+    slow = checked_marks([0.0, 2.0, 4.0, 6.0, 7.2, 8.0, 10.0, 12.0])
+    assert slow.time.tolist() == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0] and slow.doubled == 1
