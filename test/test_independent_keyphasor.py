@@ -537,6 +537,12 @@ def test_a_fast_ramp_is_followed_with_a_tight_tolerance():
     times = (-omega + np.sqrt(omega ** 2 + 2 * alpha * TWO_PI * np.arange(40))) / alpha
     marks, speed = live_speeds(times, tolerance=0.05)
     assert (marks.missed, marks.doubled, marks.irregular, marks.revolutions) == (0, 0, 0, 39)
+    # Each period's speed at its start is the one given at the end of the period before.
+    periods = [p for t in times for p in marks.mark(t) or []]
+    assert periods == [] and marks.found == 40          # repeated marks: left out
+    again = LiveMarks(tolerance=0.05)
+    periods = [p for t in times for p in again.mark(t) or []]
+    assert [p[2] for p in periods[1:]] == [p[3] for p in periods[:-1]]
     for k in range(2, 40):
         assert speed[times[k]] == pytest.approx(omega + alpha * times[k], rel=1e-9), k
 
@@ -606,6 +612,21 @@ def test_the_angle_is_given_until_three_periods_and_the_tolerance_without_a_mark
         'stopped?)'
 
 
+def test_four_turns_without_a_mark_are_a_gap_and_a_coast_down_keeps_its_last_period():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3, 0.7):          # 4 turns: more than MAX_MISSED lost
+        marks.mark(time)
+    assert (marks.missed, marks.irregular, marks.ready) == (0, 1, False)
+    # Coasting to a stop 10.5 turns on: after the last mark the fit has the rotor stop
+    # within half a turn; the period it expects is then the last one's.
+    omega, alpha = 20.0, -400.0 / (2.0 * TWO_PI * 10.5)
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(11))) / alpha
+    marks, speed = live_speeds(times)
+    assert marks.ready and marks.revolutions == 10
+    assert marks.period == pytest.approx(times[10] - times[9], rel=1e-12)
+    assert speed[times[10]] == pytest.approx(omega + alpha * times[10], rel=1e-9)
+
+
 def test_the_time_of_some_turns_from_a_mark_by_hand():
     # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
@@ -649,6 +670,13 @@ def test_live_crossings_by_hand():
     said = [falling.sample(t, v) for t, v in ((0.0, 6.0), (1.0, 4.5), (2.0, 3.25),
                                               (3.0, 2.5))]
     assert said == [None, None, None, 1.4]
+    # After a mark: down to exactly -band (3) and a wiggle inside the band are not below it.
+    said = [tach.sample(t, v) for t, v in ((12.0, 3.0), (13.0, 6.0), (14.0, 3.5), (15.0, 6.0))]
+    assert said == [None, None, None, None]
+    # Levels 2 and 10: the band is 1/8 of their difference (1), about 6.
+    offset = warmed_up(LiveSignal(hysteresis=0.125), levels=(2.0, 10.0))
+    said = [offset.sample(t, v) for t, v in ((0.0, 4.0), (1.0, 7.25))]
+    assert (offset.threshold, offset.band, said) == (6.0, 1.0, [None, 2.0 / 3.25])
     given = warmed_up(LiveSignal(threshold=2.0, hysteresis=0.125))
     said = [given.sample(t, v) for t, v in ((0.0, 0.5), (1.0, 2.5), (2.0, 3.5))]
     assert given.threshold == 2.0 and said == [None, None, 0.75]
