@@ -5,8 +5,8 @@ Run from a mutmut work's ``mutants/`` directory (``benchmarks/mutation.py`` make
 the tests mutmut ran::
 
     cd /tmp/<work>/<module>/mutants
-    MUTANTS_FILE=names.txt RESULTS_FILE=out.tsv PYTHONPATH=.:<repo>/benchmarks \\
-        python -m pytest -p mutants_in_process -q --tb=no -p no:cacheprovider TESTS...
+    export MUTANTS_FILE=names.txt RESULTS_FILE=out.tsv PYTHONPATH=.:<repo>/benchmarks
+    python -m pytest -p mutants_in_process -q --tb=no -p no:cacheprovider TESTS...
 
 ``names.txt``: one mutant a line (as ``mutmut results`` names them). The tests are
 collected once; each mutant is selected by ``MUTANT_UNDER_TEST`` and its tests run in

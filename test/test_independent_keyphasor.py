@@ -453,8 +453,11 @@ def least_squares_speed(times, first, k):
 
 
 def stepped_times(period, step, at, count=30, jitter=0.0):
-    """Marks ``period`` s apart, each odd one ``jitter`` periods late; from mark ``at`` on the
-    periods are ``step`` shorter (relative)."""
+    """
+    Return mark times ``period`` s apart, each odd one ``jitter`` periods late.
+
+    From mark ``at`` on the periods are ``step`` shorter (relative).
+    """
     times, time = [], 0.0
     for k in range(count):
         times.append(time + (jitter * period if k % 2 else 0.0))
@@ -725,7 +728,7 @@ def test_a_sample_on_the_threshold_after_the_crossing_is_not_below_it():
 
 def fitted_by_numpy(time, good, k, span):
     """
-    The fitted speed at mark k as Marks.fitted_speed defines it, by numpy's polyfit.
+    Return the fitted speed at mark k as Marks.fitted_speed defines it, by numpy's polyfit.
 
     The marks of ``span`` revolutions of its run of good periods, centred on it where the
     run allows (else the run's first or last ``span``; all of a shorter run); NaN alone.
@@ -816,8 +819,10 @@ def test_motion_between_jittered_marks_is_the_hermite_cubic_of_their_fitted_spee
 
 def test_a_doubled_mark_among_four_and_on_a_slow_rotor():
     """
-    Periods 0.1, 1.2, 1.3: the neighbours' medians (ends reflected) 1.25, 1.2, 0.65; the first
-    is short and with the next makes 1.3, within 20 % of min(1.25, 1.2): an extra mark.
+    Drop the extra mark of periods 0.1, 1.2, 1.3, and of a 2 s turn split in two.
+
+    The neighbours' medians (ends reflected) are 1.25, 1.2, 0.65; the first period is short
+    and with the next makes 1.3, within 20 % of min(1.25, 1.2): an extra mark.
     """
     marks = checked_marks([0.0, 0.1, 1.3, 2.6])
     assert marks.time.tolist() == [0.0, 1.3, 2.6] and marks.doubled == 1
