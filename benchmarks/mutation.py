@@ -135,6 +135,10 @@ MILLION = ['test/test_stability.py::test_a_million_components_keep_a_residual_of
            'their_mass_moment',
            'test/test_stability.py::test_float64_sums_lose_the_million_component_residual']
 """Ten seconds and more a run: they guard the compensated sums (kept for that module)."""
+FRESH = {'compensated', 'inertia'}
+"""Modules whose kernels are traced and cached per process: each test starts without them
+(benchmarks/fresh_programs.py), else mutmut puts the tracing code down to the first test
+that traced it and tests its mutants with that test only."""
 COPY = ('cvc_balance', 'test', 'config', 'bags', 'docs', 'resource', 'pytest.ini',
         'package.xml', 'setup.py', 'setup.cfg')
 
@@ -152,8 +156,12 @@ def toml_list(values):
     return '[' + ', '.join(json.dumps(str(v)) for v in values) + ']'
 
 
-def prepare(work, module, tests, deselected=()):
-    """Copy the tree (tracked and new files) to ``work``, with mutmut's settings for a module."""
+def prepare(work, module, tests, deselected=(), fresh=False):
+    """
+    Copy the tree (tracked and new files) to ``work``, with mutmut's settings for a module.
+
+    ``fresh``: load benchmarks/fresh_programs.py (copied to ``work``/plugins) in every test run.
+    """
     if work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
@@ -169,6 +177,10 @@ def prepare(work, module, tests, deselected=()):
     present = [t for t in tests if (work / t).exists()]
     deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION) + list(deselected)
     args = ['-p', 'no:cacheprovider', '-q'] + [f'--deselect={d}' for d in deselect]
+    if fresh:
+        (work / 'plugins').mkdir()
+        shutil.copy2(ROOT / 'benchmarks' / 'fresh_programs.py', work / 'plugins')
+        args += ['-p', 'fresh_programs']
     (work / 'pyproject.toml').write_text(
         '[tool.mutmut]\n'
         'source_paths = ["cvc_balance"]\n'
@@ -186,8 +198,12 @@ def prepare(work, module, tests, deselected=()):
 def run_module(name, work, children, tests=None, deselected=()):
     """Run mutmut on one module; return its counts and the survivors' diffs."""
     module, guarding = MODULES[name]
-    present = prepare(work, module, tests or guarding, deselected)
+    fresh = name in FRESH
+    present = prepare(work, module, tests or guarding, deselected, fresh)
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE='1', RERUN_TELEMETRY_ENABLED='false')
+    if fresh:
+        env['PYTHONPATH'] = os.pathsep.join(
+            [str(work / 'plugins')] + [p for p in [os.environ.get('PYTHONPATH')] if p])
     started = time.monotonic()
     log = open(work / 'mutmut.log', 'w')
     subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children)],

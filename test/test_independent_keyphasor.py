@@ -15,8 +15,10 @@ import math
 import numpy as np
 import pytest
 
-from cvc_balance.physics.keyphasor import (_longest_run, _neighbours_median, checked_marks,
-                                           Marks, signal_levels, signal_marks,
+from cvc_balance.physics.keyphasor import (_longest_run, _neighbours_median, _turn_time,
+                                           checked_marks, fit_at_zero, LiveMarks,
+                                           LiveSignal, Marks,
+                                           marks_summary, signal_levels, signal_marks,
                                            steady_stretches)
 
 TWO_PI = 2 * math.pi
@@ -319,5 +321,511 @@ def test_a_stretch_stops_at_a_gap_and_its_spread_is_its_worst_mark():
 
 def test_the_longest_run():
     for mask, want in (([1, 1, 0, 1, 1, 1, 0], (3, 6)), ([0, 1, 0, 0, 1, 1], (4, 6)),
-                       ([1, 1, 1], (0, 3)), ([0, 1], (1, 2))):
+                       ([1, 1, 1], (0, 3)), ([0, 1], (1, 2)),
+                       ([1, 1, 1, 0, 1], (0, 3)), ([1, 0, 1, 1, 0, 1, 1], (2, 4))):
         assert _longest_run(np.array(mask, bool)) == want
+
+
+def test_a_run_of_one_period_between_gaps_has_its_periods_speed_at_both_marks():
+    t = ramp_marks(7)
+    # Runs: marks 0-1, 2-3 (one period, not the first run), 4-6.
+    speed = Marks(t, np.array([True, False, True, False, True, True]), 7).mark_speed()
+    for k in (0, 2):
+        assert speed[k] == speed[k + 1] == pytest.approx(TWO_PI / (t[k + 1] - t[k]), rel=1e-15)
+
+
+# -- steady stretches of given mark speeds ------------------------------------------------
+
+class GivenSpeeds:
+    """Marks whose speeds at the marks are given (all that steady_stretches reads of them)."""
+
+    def __init__(self, speed, good, time):
+        self.speed, self.good, self.time = np.array(speed, float), np.array(good, bool), time
+
+    def mark_speed(self, span):
+        """Return the given speeds, whatever the span."""
+        return self.speed.copy()
+
+
+def stretches_by_hand(speed, good, time, tolerance, least):
+    """
+    Steady stretches as the description defines them, one start at a time, in plain Python.
+
+    From each start (a finite speed, its period good), the marks while the periods stay
+    good, the speeds finite and max - min <= tolerance (max + min); kept when that is at
+    least ``least`` revolutions, then cut to its first longest run within tolerance x its
+    median of that median, kept again if still ``least``; the next start is the kept
+    stretch's last mark (or the next mark).
+    """
+    found, i, n = [], 0, len(speed)
+    while i < n - 1:
+        j = i
+        while j + 1 < n and good[j] and math.isfinite(speed[j + 1]):
+            part = speed[i:j + 2]
+            if max(part) - min(part) > tolerance * (max(part) + min(part)):
+                break
+            j += 1
+        if not (math.isfinite(speed[i]) and good[i]) or j - i < least:
+            i += 1
+            continue
+        part = list(speed[i:j + 1])
+        middle = sorted(part)[len(part) // 2] if len(part) % 2 else \
+            0.5 * (sorted(part)[len(part) // 2 - 1] + sorted(part)[len(part) // 2])
+        best, start = (0, 0), None
+        for k, value in enumerate(part + [math.inf]):
+            if abs(value - middle) <= tolerance * middle:
+                start = k if start is None else start
+            elif start is not None:
+                best = max(best, (k - start, -start))
+                start = None
+        first, last = i - best[1], i - best[1] + best[0] - 1
+        if last - first >= least:
+            mean = TWO_PI * (last - first) / (time[last] - time[first])
+            found.append((first, last, mean, max(abs(s - mean) for s in speed[first:last + 1])
+                          / mean))
+        i = max(last, i + 1)
+    return found
+
+
+def test_stretches_on_the_bounds_by_hand():
+    """Tolerance 1/4, speeds of a few binary fractions: both bounds met exactly."""
+    time = np.arange(9.0) * math.pi      # 2 pi 8 / 8 pi: a mean speed of 2
+    # 1.5 and 2.5: the range 1 is 1/4 of 1.5 + 2.5 exactly; the median 2 and 2.5 - 2 = 2 / 4.
+    (stretch,) = steady_stretches(GivenSpeeds([2.0] * 7 + [1.5, 2.5], [True] * 8, time),
+                                  tolerance=0.25)
+    assert (stretch.first, stretch.last, stretch.revolutions) == (0, 8, 8)
+    assert stretch.speed == pytest.approx(2.0, rel=1e-15)
+    assert stretch.spread == pytest.approx(0.25, rel=1e-15)      # 1.5 and 2.5 are 1/2 off
+    # A stretch of one revolution at the very end; after a short one, the next start.
+    ends = GivenSpeeds([1.0, 1.0, 9.0, 9.0], [True] * 3, np.arange(4.0))
+    assert [(s.first, s.last) for s in steady_stretches(ends, 0.25, 1)] == [(0, 1), (2, 3)]
+    late = GivenSpeeds([1.0, 9.0, 9.0, 9.0], [True] * 3, np.arange(4.0))
+    assert [(s.first, s.last) for s in steady_stretches(late, 0.25, 2)] == [(1, 3)]
+
+
+def test_stretches_of_random_speeds_as_defined():
+    """Speeds drawn from a few binary fractions (ties on both bounds), gaps, lone marks."""
+    rng = np.random.default_rng(29)
+    levels = np.array([3.0, 3.5, 4.0, 4.5, 5.0, 6.0])
+    checked = 0
+    for case in range(120):
+        n = int(rng.integers(2, 40))
+        good = rng.random(n - 1) < 0.9
+        # A speed drifts from level to level, or steps; NaN where a mark has no good period.
+        speed = levels[np.clip(np.cumsum(rng.integers(-1, 2, n)) + 2, 0, 5)]
+        lone = ~np.concatenate([[False], good]) & ~np.concatenate([good, [False]])
+        speed[lone] = np.nan
+        time = np.cumsum(rng.uniform(0.5, 1.5, n))
+        tolerance, least = [0.25, 0.125, 0.0625][case % 3], int(rng.integers(1, 6))
+        got = steady_stretches(GivenSpeeds(speed, good, time), tolerance, least)
+        want = stretches_by_hand(speed.tolist(), good.tolist(), time, tolerance, least)
+        assert [(s.first, s.last) for s in got] == [w[:2] for w in want], case
+        for s, (first, last, mean, spread) in zip(got, want):
+            assert (s.start, s.end, s.revolutions) == (time[first], time[last], last - first)
+            assert s.speed == pytest.approx(mean, rel=1e-15)
+            assert s.spread == pytest.approx(spread, rel=1e-12, abs=1e-15)
+        checked += len(want)
+    assert checked > 100
+
+
+def test_the_marks_summary_in_words():
+    assert marks_summary('/tach', 10, 1, 2, 3, 9) == (
+        'keyphasor /tach: 10 marks, 1 missed (put back), 2 doubled (dropped), 3 irregular '
+        'periods (no angle there), 9 revolutions')
+
+
+# -- the marks, live: the fit, and when it forgets ------------------------------------------
+
+def live_speeds(times, resolution=None, **options):
+    """Feed mark times to LiveMarks; return it and the speed it gives at each good mark."""
+    marks, speeds = LiveMarks(**options), {}
+    for time in times:
+        given = marks.mark(time) if resolution is None else marks.mark(time, resolution)
+        for _, end, _, speed in given or []:
+            speeds[end] = speed
+    return marks, speeds
+
+
+def least_squares_speed(times, first, k):
+    """Slope at mark k of numpy's least-squares quadratic (a line for two), marks first..k."""
+    x = np.asarray(times[first:k + 1]) - times[k]
+    return np.polyfit(x, TWO_PI * np.arange(first - k, 1), 2 if k - first >= 2 else 1)[-2]
+
+
+def stepped_times(period, step, at, count=30, jitter=0.0):
+    """
+    Return mark times ``period`` s apart, each odd one ``jitter`` periods late.
+
+    From mark ``at`` on the periods are ``step`` shorter (relative).
+    """
+    times, time = [], 0.0
+    for k in range(count):
+        times.append(time + (jitter * period if k % 2 else 0.0))
+        time += period * (1.0 - step if k + 1 >= at else 1.0)
+    return times
+
+
+def test_a_change_of_speed_restarts_the_live_fit_from_the_two_marks_before_it():
+    """
+    Steady at 0.1 s a turn, then 5 % faster from mark 12 on (exact mark times).
+
+    Each speed is the least-squares slope over the run's last nine marks (SPAN_REVS), until
+    a mark leads the fit's prediction by more than 1 % of a turn (CHANGE: the marks' own
+    scatter here is nil) once three leads were seen: mark 12 leads by 5 %, so the fit
+    keeps only the two marks before it; once the kept marks are all on the new speed (mark
+    15), the speed is exact again.
+    """
+    times = stepped_times(0.1, 0.05, 12)
+    marks, speed = live_speeds(times)
+    assert (marks.found, marks.revolutions, marks.irregular) == (30, 29, 0)
+    for k in range(1, 12):
+        assert speed[times[k]] == pytest.approx(TWO_PI / 0.1, rel=1e-12), k
+    for k in (12, 13):
+        assert speed[times[k]] == pytest.approx(least_squares_speed(times, 10, k), rel=1e-9)
+    for k in range(15, 30):
+        assert speed[times[k]] == pytest.approx(TWO_PI / 0.095, rel=1e-12), k
+    # Without the restart mark 14 would still see marks 10 and 11 of the old speed.
+    assert speed[times[14]] != pytest.approx(least_squares_speed(times, 6, 14), rel=1e-3)
+    # A sampled tach's resolution widens the limit to 2 x resolution / period: 6 % keeps
+    # every mark in the fit, 4 % does not; a 0.5 % step is below CHANGE.
+    _, wide = live_speeds(times, resolution=0.003)
+    _, narrow = live_speeds(times, resolution=0.002)
+    _, small = live_speeds(stepped_times(0.1, 0.005, 12))
+    small_times = stepped_times(0.1, 0.005, 12)
+    for k in range(12, 20):
+        assert wide[times[k]] == pytest.approx(least_squares_speed(times, k - 8, k), rel=1e-9)
+        assert small[small_times[k]] == pytest.approx(
+            least_squares_speed(small_times, k - 8, k), rel=1e-9)
+    assert narrow[times[12]] == pytest.approx(least_squares_speed(times, 10, 12), rel=1e-9)
+    # The same with a doubled mark in the period before the step: dropped, and the mark
+    # that ends the period still judged with the tach's resolution.
+    doubled = sorted(times + [0.5 * (times[11] + times[12])])
+    marks, wide = live_speeds(doubled, resolution=0.003)
+    assert marks.doubled == 1
+    assert wide[times[12]] == pytest.approx(least_squares_speed(times, 4, 12), rel=1e-9)
+
+
+def test_the_first_three_leads_only_learn_the_marks_scatter():
+    """Marks 0-3 are learnt; marks 4, 5, 6 give the first three leads; mark 7 the first check."""
+    early = stepped_times(0.1, 0.05, 6)
+    _, speed = live_speeds(early)
+    for k in (6, 7):
+        assert speed[early[k]] == pytest.approx(least_squares_speed(early, 0, k), rel=1e-9)
+    late = stepped_times(0.1, 0.05, 7)
+    _, speed = live_speeds(late)
+    assert speed[late[7]] == pytest.approx(least_squares_speed(late, 5, 7), rel=1e-9)
+
+
+def test_the_limit_is_four_times_the_marks_mean_scatter():
+    """
+    Odd marks 0.3 % of a turn late: leads of +-0.36 %, a mean |lead| of 0.37 % at mark 19.
+
+    The limit is then 4 x 0.37 % = 1.46 % (measured 0.0146): a lead of 1.66 % at mark 20
+    (the jitter's -0.36 % and a step of -1.3 %) restarts the fit, one of 1.26 % (a step of
+    -0.9 %) does not, though it is more than CHANGE.
+    """
+    restarts = stepped_times(0.1, 0.013, 20, jitter=0.003)
+    _, speed = live_speeds(restarts)
+    assert speed[restarts[20]] == pytest.approx(least_squares_speed(restarts, 18, 20),
+                                                rel=1e-9)
+    kept = stepped_times(0.1, 0.009, 20, jitter=0.003)
+    _, speed = live_speeds(kept)
+    for k in (19, 20, 21):
+        assert speed[kept[k]] == pytest.approx(least_squares_speed(kept, k - 8, k), rel=1e-9)
+
+
+def test_a_fast_ramp_is_followed_with_a_tight_tolerance():
+    """Spin-up 2 % a turn (omega 100 rad/s, alpha 32 rad/s^2): each period against its own."""
+    omega, alpha = 100.0, 32.0
+    times = (-omega + np.sqrt(omega ** 2 + 2 * alpha * TWO_PI * np.arange(40))) / alpha
+    marks, speed = live_speeds(times, tolerance=0.05)
+    assert (marks.missed, marks.doubled, marks.irregular, marks.revolutions) == (0, 0, 0, 39)
+    # Each period's speed at its start is the one given at the end of the period before.
+    periods = [p for t in times for p in marks.mark(t) or []]
+    assert periods == [] and marks.found == 40          # repeated marks: left out
+    again = LiveMarks(tolerance=0.05)
+    periods = [p for t in times for p in again.mark(t) or []]
+    assert [p[2] for p in periods[1:]] == [p[3] for p in periods[:-1]]
+    for k in range(2, 40):
+        assert speed[times[k]] == pytest.approx(omega + alpha * times[k], rel=1e-9), k
+
+
+# -- the marks, live: which marks are taken ----------------------------------------------------
+
+def test_a_mark_not_after_the_newest_is_left_out_in_every_state():
+    marks = LiveMarks()
+    assert marks.mark(0.0) == [] and marks.mark(0.0) is None and marks.mark(-1.0) is None
+    assert marks.found == 1                                          # learning
+    for time in (0.1, 0.2, 0.3):
+        marks.mark(time)
+    assert marks.ready and marks.found == 4
+    assert marks.mark(0.3) is None and marks.found == 4             # the newest good mark
+    assert marks.mark(0.34) == [] and marks.found == 5              # short: held
+    assert marks.mark(0.34) is None and marks.mark(0.32) is None    # not after the held one
+    assert marks.found == 5
+    (period,) = marks.mark(0.4)
+    assert period[:2] == (0.3, 0.4) and (marks.found, marks.doubled) == (6, 1)
+
+
+def test_a_short_period_not_followed_by_one_revolution_starts_again_from_its_mark():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3):
+        marks.mark(time)
+    assert marks.mark(0.45) == [] and marks.irregular == 1          # 1.5 turns: irregular
+    for time in (0.55, 0.65, 0.75):
+        marks.mark(time)
+    assert marks.ready
+    assert marks.mark(0.79) == []                                   # short: held
+    assert marks.mark(0.9) == [] and marks.irregular == 2           # 1.5 turns from 0.75
+    assert not marks.ready
+    assert marks.motion_at(0.95) == 'keyphasor: learning the period (2 marks of 4)'
+    assert marks.mark(1.01) == []
+    periods = marks.mark(1.12)
+    assert [p[:2] for p in periods] == [(0.79, 0.9), (0.9, 1.01), (1.01, 1.12)]
+    assert marks.mark(1.28) == [] and marks.irregular == 3          # 1.45 turns
+
+
+def test_learning_takes_three_periods_each_within_the_tolerance_of_the_one_before():
+    # 1, 1.3, 1.1: the second is 30 % longer than the first.
+    marks = LiveMarks()
+    for time in (0.0, 1.0, 2.3, 3.4):
+        marks.mark(time)
+    assert not marks.ready and marks.irregular == 1
+    # 1, 1.1, 1.3: each within 20 % of the one before (1.3 / 1.1 = 1.18).
+    marks = LiveMarks()
+    for time in (0.0, 1.0, 2.1, 3.4):
+        marks.mark(time)
+    assert marks.ready and marks.irregular == 0 and marks.revolutions == 3
+    # Tolerance 1/4: 1.25 after 1 is within it, exactly.
+    marks = LiveMarks(tolerance=0.25)
+    for time in (0.0, 1.0, 2.25, 3.5625):
+        marks.mark(time)
+    assert marks.ready and marks.irregular == 0
+
+
+def test_the_angle_is_given_until_three_periods_and_the_tolerance_without_a_mark():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3):
+        marks.mark(time)
+    for periods in (1.5, 3.0):
+        angle, omega = marks.motion_at(0.3 + 0.1 * periods)
+        assert angle == pytest.approx(TWO_PI * periods, rel=1e-12)
+        assert omega == pytest.approx(TWO_PI / 0.1, rel=1e-12)
+    assert marks.motion_at(0.3 + 0.1 * 3.25) == 'keyphasor: no mark for 0.325 s (the rotor ' \
+        'stopped?)'
+
+
+def test_four_turns_without_a_mark_are_a_gap_and_a_coast_down_keeps_its_last_period():
+    marks = LiveMarks()
+    for time in (0.0, 0.1, 0.2, 0.3, 0.7):          # 4 turns: more than MAX_MISSED lost
+        marks.mark(time)
+    assert (marks.missed, marks.irregular, marks.ready) == (0, 1, False)
+    # Coasting to a stop 10.5 turns on: after the last mark the fit has the rotor stop
+    # within half a turn; the period it expects is then the last one's.
+    omega, alpha = 20.0, -400.0 / (2.0 * TWO_PI * 10.5)
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(11))) / alpha
+    marks, speed = live_speeds(times)
+    assert marks.ready and marks.revolutions == 10
+    assert marks.period == pytest.approx(times[10] - times[9], rel=1e-12)
+    assert speed[times[10]] == pytest.approx(omega + alpha * times[10], rel=1e-9)
+
+
+def test_the_time_of_some_turns_from_a_mark_by_hand():
+    # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
+    assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
+        (-TWO_PI + math.sqrt(TWO_PI ** 2 + 8 * math.pi)) / 2.0, rel=1e-15)
+    assert _turn_time(TWO_PI, 0.0, 3, None) == pytest.approx(3.0, rel=1e-15)
+    assert _turn_time(0.5, 0.0, 1, None) == pytest.approx(4.0 * math.pi, rel=1e-15)
+    # Stopping exactly at the turn (4 pi^2 - 2 pi 2 pi = 0): it never passes it.
+    assert _turn_time(TWO_PI, -math.pi, 1, 'x') == 'x'
+    # Stopping first (4 pi^2 - 2 x 4 x 4 pi < 0), or not turning forward: the value given.
+    assert _turn_time(TWO_PI, -4.0, 2, 'x') == 'x'
+    assert _turn_time(0.0, 1.0, 1, 'x') == 'x' and _turn_time(-1.0, 5.0, 1, 'x') == 'x'
+
+
+# -- a sampled tach, live ------------------------------------------------------------------
+
+def warmed_up(signal, levels=(0.0, 8.0)):
+    """Feed the 256 samples the levels are first judged over (half low, half high); t < 0."""
+    for k in range(256):
+        signal.sample(-1.0 + k / 1024.0, levels[k % 2])
+    return signal
+
+
+def test_live_crossings_by_hand():
+    """Levels 0 and 8, threshold 4, band 1/8 x 8 = 1 (every figure exact in binary)."""
+    tach = warmed_up(LiveSignal(hysteresis=0.125))
+    assert (tach.levels, tach.threshold, tach.band) == ((0.0, 8.0), 4.0, 1.0)
+    # Below the band, then up through the threshold (3 -> 6 between t 1 and 2: at 1 1/3);
+    # the mark is said by the first sample beyond the band.
+    said = [tach.sample(t, v) for t, v in ((0.0, 2.0), (1.0, 3.0), (2.0, 4.5), (3.0, 6.0))]
+    assert said == [None, None, None, 1.0 + 1.0 / 1.5] and tach.spacing == 1.0
+    # Exactly on the band's edge (5) is not beyond it; a sample exactly on the threshold is
+    # where the crossing is.
+    said = [tach.sample(t, v) for t, v in ((4.0, 2.0), (5.0, 4.0), (6.0, 5.0), (7.0, 5.5))]
+    assert said == [None, None, None, 5.0]
+    # Timed between the last sample below and the next, whatever follows inside the band.
+    said = [tach.sample(t, v) for t, v in ((8.0, 2.0), (9.0, 4.5), (10.0, 4.0), (11.0, 6.0),
+                                           (11.5, 6.0))]
+    assert said == [None, None, None, 8.0 + 2.0 / 2.5, None] and tach.spacing == 0.5
+    # Falling: the same levels, the crossing from above; 3.25 is inside the band.
+    falling = warmed_up(LiveSignal('falling', hysteresis=0.125))
+    said = [falling.sample(t, v) for t, v in ((0.0, 6.0), (1.0, 4.5), (2.0, 3.25),
+                                              (3.0, 2.5))]
+    assert said == [None, None, None, 1.4]
+    # After a mark: down to exactly -band (3) and a wiggle inside the band are not below it.
+    said = [tach.sample(t, v) for t, v in ((12.0, 3.0), (13.0, 6.0), (14.0, 3.5), (15.0, 6.0))]
+    assert said == [None, None, None, None]
+    # Levels 2 and 10: the band is 1/8 of their difference (1), about 6.
+    offset = warmed_up(LiveSignal(hysteresis=0.125), levels=(2.0, 10.0))
+    said = [offset.sample(t, v) for t, v in ((0.0, 4.0), (1.0, 7.25))]
+    assert (offset.threshold, offset.band, said) == (6.0, 1.0, [None, 2.0 / 3.25])
+    given = warmed_up(LiveSignal(threshold=2.0, hysteresis=0.125))
+    said = [given.sample(t, v) for t, v in ((0.0, 0.5), (1.0, 2.5), (2.0, 3.5))]
+    assert given.threshold == 2.0 and said == [None, None, 0.75]
+
+
+def test_live_levels_are_judged_at_256_512_1024_samples_then_over_the_latest_4096():
+    tach = LiveSignal()
+    assert tach.levels is None
+    for k in range(255):
+        tach.sample(k, math.nan)                # not counted
+        tach.sample(k + 0.5, 1.0 if k % 2 else 0.0)
+    assert tach.levels is None and tach.threshold is None
+    tach.sample(300.0, 1.0)
+    assert tach.levels == (0.0, 1.0)            # the 256th sample
+    for k in range(255):
+        tach.sample(301.0 + k, 3.0 if k % 2 else 0.0)
+    assert tach.levels == (0.0, 1.0)
+    tach.sample(556.0, 3.0)                     # the 512th: 0 below 1.5; 128 3's above
+    assert tach.levels == (0.0, 3.0)
+    highs = iter([1.0, 1.5] * 4096)
+    values = [next(highs) if k % 2 else 0.0 for k in range(8192 - 512)]
+    for k, value in enumerate(values[:-1]):
+        tach.sample(557.0 + k, value)
+    # Judged last at the 4096th sample, over all: 3 is the top, 1.5 the middle.
+    assert tach.levels == (0.0, 3.0)
+    tach.sample(10000.0, values[-1])
+    # The 8192nd: over the latest 4096 only (1's and 1.5's: the 3's are gone).
+    assert tach.levels == (0.0, 1.25)
+    for text, kwargs in (("keyphasor edge must be rising or falling, got 'up'", {'edge': 'up'}),
+                         ('keyphasor threshold must be finite, got inf',
+                          {'threshold': math.inf})):
+        with pytest.raises(ValueError) as caught:
+            LiveSignal(**kwargs)
+        assert str(caught.value) == text
+
+
+def test_a_sample_on_the_threshold_after_the_crossing_is_not_below_it():
+    """Threshold 4 (levels 0, 8; band 1): -4, +0.5, 0, +4: the crossing is between the first."""
+    t = np.arange(8.0)
+    values = np.array([0.0, 0.0, 4.5, 4.0, 8.0, 8.0, 0.0, 0.0])
+    assert signal_marks(t, values, threshold=4.0, hysteresis=0.125).tolist() == \
+        [1.0 + 4.0 / 4.5]
+
+
+# -- the fitted speed at each mark, against numpy's least squares ----------------------------
+
+def fitted_by_numpy(time, good, k, span):
+    """
+    Return the fitted speed at mark k as Marks.fitted_speed defines it, by numpy's polyfit.
+
+    The marks of ``span`` revolutions of its run of good periods, centred on it where the
+    run allows (else the run's first or last ``span``; all of a shorter run); NaN alone.
+    """
+    first = k
+    while first > 0 and good[first - 1]:
+        first -= 1
+    last = k
+    while last < len(good) and good[last]:
+        last += 1
+    width = min(last - first, span)
+    if width == 0:
+        return math.nan
+    lo = min(max(k - width // 2, first), last - width)
+    x = time[lo:lo + width + 1] - time[k]
+    return np.polyfit(x, TWO_PI * (np.arange(lo, lo + width + 1) - k),
+                      2 if width >= 2 else 1)[-2]
+
+
+@pytest.mark.parametrize('span', [8, 3, 2, 1])
+def test_fitted_speeds_of_jittered_marks_with_gaps(span):
+    rng = np.random.default_rng(span)
+    time = np.cumsum(rng.uniform(0.09, 0.11, 60))
+    good = np.ones(59, bool)
+    good[[5, 6, 20, 30, 31, 33, 50]] = False        # runs of 5, 13, 9, 1, 16, 8 periods...
+    speed = Marks(time, good, 60).fitted_speed(span)
+    for k in range(60):
+        want = fitted_by_numpy(time, good, k, span)
+        if math.isnan(want):
+            assert math.isnan(speed[k]), k
+        else:
+            assert speed[k] == pytest.approx(want, rel=1e-10), k
+    assert math.isnan(speed[6]) and math.isnan(speed[31])     # alone between two gaps
+    assert np.isnan(Marks(time[:1], good[:0], 1).fitted_speed(span)).tolist() == [True]
+
+
+def test_fit_at_zero_against_numpy_row_by_row():
+    rng = np.random.default_rng(5)
+    offsets = rng.uniform(-2.0, 1.0, (7, 30))
+    turns = rng.normal(size=(7, 30))
+    valid = rng.random((7, 30)) < 0.6
+    valid[:, :4] = [[True] * 4, [True] * 4] + [[False] * 4] * 5     # two points each
+    valid[:, 4:6] = [[True] * 2] + [[False] * 2] * 6                 # one point
+    valid[:, 6] = False                                              # none
+    value, slope, second = fit_at_zero(offsets, turns, valid)
+    for row in range(30):
+        used = valid[:, row]
+        if used.sum() < 2:
+            assert math.isnan(value[row]) and math.isnan(slope[row]), row
+            assert math.isnan(second[row]), row
+            continue
+        degree = 2 if used.sum() >= 3 else 1
+        fit = np.polyfit(offsets[used, row], turns[used, row], degree)[::-1]
+        want = (fit[0], fit[1], 2.0 * fit[2] if degree == 2 else 0.0)
+        got = (value[row], slope[row], second[row])
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), row
+    # Without a mask every point counts; the turns given once for all rows.
+    value, slope, second = fit_at_zero(offsets, turns[:, 0])
+    for row in (0, 17):
+        fit = np.polyfit(offsets[:, row], turns[:, 0], 2)[::-1]
+        assert (value[row], slope[row], second[row]) == pytest.approx(
+            (fit[0], fit[1], 2.0 * fit[2]), rel=1e-9)
+
+
+def test_motion_between_jittered_marks_is_the_hermite_cubic_of_their_fitted_speeds():
+    """Jittered marks (the cubic's third-order term is not 0 there), a gap; any sample order."""
+    rng = np.random.default_rng(17)
+    time = np.cumsum(rng.uniform(0.09, 0.11, 14))
+    good = np.ones(13, bool)
+    good[6] = False
+    marks = Marks(time, good, 14)
+    speed = [fitted_by_numpy(time, good, k, 8) for k in range(14)]
+    where = [(k, share) for k in (0, 3, 5, 7, 12) for share in (0.0, 0.3, 0.8)] + [(12, 1.0)]
+    at = np.array([time[k] + share * (time[k + 1] - time[k]) for k, share in where])
+    for order in (np.arange(len(at)), np.arange(len(at))[::-1], rng.permutation(len(at))):
+        angle, omega, alpha = marks.motion(at[order])
+        for n, (k, share) in enumerate(where[i] for i in order):
+            want = hermite_by_hand(time, speed, k, share)
+            assert (angle[n], omega[n], alpha[n]) == pytest.approx(want, rel=1e-9, abs=1e-9), \
+                (k, share)
+    first_smallest = np.array([0, 5, 2, 3])      # the first is the earliest, the rest not sorted
+    angle, omega, alpha = marks.motion(at[first_smallest])
+    for n, i in enumerate(first_smallest):
+        assert angle[n] == pytest.approx(hermite_by_hand(time, speed, *where[i])[0], abs=1e-9)
+    no_alpha = marks.motion(at, acceleration=False)
+    assert no_alpha[2] is None and np.array_equal(no_alpha[1], marks.motion(at)[1])
+
+
+def test_a_doubled_mark_among_four_and_on_a_slow_rotor():
+    """
+    Drop the extra mark of periods 0.1, 1.2, 1.3, and of a 2 s turn split in two.
+
+    The neighbours' medians (ends reflected) are 1.25, 1.2, 0.65; the first period is short
+    and with the next makes 1.3, within 20 % of min(1.25, 1.2): an extra mark.
+    """
+    marks = checked_marks([0.0, 0.1, 1.3, 2.6])
+    assert marks.time.tolist() == [0.0, 1.3, 2.6] and marks.doubled == 1
+    # A turn of 2 s split 1.2 + 0.8: short is against 0.8 x the usual period (1.6 s).
+    slow = checked_marks([0.0, 2.0, 4.0, 6.0, 7.2, 8.0, 10.0, 12.0])
+    assert slow.time.tolist() == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0] and slow.doubled == 1

@@ -311,3 +311,21 @@ def test_balancing_settings_take_effect():
     with pytest.raises(ValueError, match='service speed'):
         assess_balance(RotorModel.from_layout(defaults))
     np.testing.assert_array_equal(defaults.placement[0], [60.0, 50.0])
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'name': ''}, "component #2: field name must be a non-empty string, got ''"),
+    ({'name': 5}, 'component #2: field name must be a non-empty string, got 5'),
+    ({'radius': 'x'}, "component 'detector': field radius must be a number, got 'x'"),
+    ({'z': 'x'}, "component 'detector': field z must be a number, got 'x'"),
+    ({'mass': 0.0}, "component 'detector': field mass must be from 1e-06 to 1e+12 kg (a milligram or more:"
+                     " lighter is no part, and divides mass ratios to inf), got 0 kg"),
+])
+def test_a_plain_component_is_refused_in_the_same_words(change, message):
+    """A component of only name, mass, radius, angle, z is read on a fast path first."""
+    layout = good()
+    layout['components'][1] = {'name': 'detector', 'mass': 50.0, 'radius': 0.4,
+                               'angle': 3.0, **change}
+    with pytest.raises(LayoutError) as error:
+        parse_layout(layout)
+    assert str(error.value) == message

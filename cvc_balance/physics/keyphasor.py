@@ -183,8 +183,7 @@ class Marks:
         one_period = last[behind] - first[behind] == 1
         speed[behind] = np.where(one_period, period_behind,
                                  2.0 * period_behind - previous_speed)
-        speed[(half == 0) & (first == last)] = np.nan
-        return speed
+        return speed                # a lone mark (first == last): 0 / 0 above, NaN
 
     def fitted_speed(self, span=SPAN_REVS):
         """
@@ -212,7 +211,6 @@ class Marks:
         speed = np.full(n, np.nan)
         # Most marks: a whole span centred on them (the windows are views of the times,
         # the turns the same for all); the others (near a run's ends) gathered one by one.
-        centred = (width == span) & (lo == index - span // 2)
         half = span // 2
         centred = (width == span) & (lo == index - half)
         if n > span and centred[half:n - span + half].any():
