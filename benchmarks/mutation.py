@@ -166,7 +166,7 @@ def prepare(work, module, tests, deselected=()):
             target = work / name
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, target)
-    present = [t for t in tests if (work / t).exists()]
+    present = [t for t in tests if (work / t.split('::')[0]).exists()]   # files or test ids
     deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION) + list(deselected)
     args = ['-p', 'no:cacheprovider', '-q'] + [f'--deselect={d}' for d in deselect]
     (work / 'pyproject.toml').write_text(
@@ -224,9 +224,9 @@ def main():
                         help='where the copies go (default %(default)s)')
     parser.add_argument('--children', type=int, default=2, help='mutants tested at once')
     parser.add_argument('--tests', nargs='+', metavar='FILE',
-                        help="test files to run instead of the module's own (MODULES): a "
-                             'narrower, faster selection, given in docs/mutation.md with its '
-                             'results')
+                        help="test files (or test ids, file::name) to run instead of the "
+                             "module's own (MODULES): a narrower, faster selection, given in "
+                             'docs/mutation.md with its results')
     parser.add_argument('--deselect', nargs='+', default=[], metavar='TEST',
                         help='tests (pytest node ids) left out besides DESELECT')
     args = parser.parse_args()

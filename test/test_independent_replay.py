@@ -151,3 +151,43 @@ def test_rejected_layout_messages_are_said_one_by_one_up_to_five(tmp_path, monke
                            'error: RuntimeError: the parser failed')
     assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
                for k, p in zip(range(2, 6), problems))
+
+
+def test_a_keyphasor_named_on_its_own_topic_is_the_motion(tmp_path):
+    """
+    read_inputs with the keyphasor named (``--keyphasor /tach``): that topic's marks.
+
+    Twelve TimeReference marks 0.25 s apart on /tach (4 revolutions a second), and a decoy
+    /keyphasor (the default name) whose marks are 0.5 s apart: every sample's speed is
+    8 pi rad/s and its angle 2 pi times the revolutions since the last mark, by hand
+    (held to 1e-9).
+    """
+    from cvc_balance.bag.inputs import InputTopics
+    from cvc_balance.bag.mcap_writer import BagWriter
+    from cvc_balance.bag.replay import read_inputs
+    from tach_bags import time_reference
+    path = tmp_path / 'tach.mcap'
+    start = 3 * 10**9
+    with BagWriter(path) as writer:
+        for topic, period in (('/tach', 250_000_000), ('/keyphasor', 500_000_000)):
+            channel = writer.add_channel(topic, 'sensor_msgs/msg/TimeReference')
+            for k in range(12):
+                ns = start + k * period
+                writer.write(channel, ns + 1_000_000, time_reference(ns, ns + 1_000_000))
+    motion, layouts = read_inputs(Bag(path), 'gantry_joint', InputTopics(keyphasor='/tach'))
+    assert layouts == [] and len(motion.stamp) >= 11 * 8
+    turns = (motion.stamp - start) / 250_000_000
+    assert turns.min() >= 0.0 and turns.max() <= 11.0
+    np.testing.assert_allclose(motion.omega, 8 * math.pi, rtol=1e-9)
+    wrapped = np.angle(np.exp(2j * math.pi * turns))
+    assert np.abs(np.angle(np.exp(1j * (motion.angle - wrapped)))).max() <= 1e-9
+
+
+def test_a_joint_state_topic_without_messages_gives_no_samples(tmp_path):
+    """No JointState at all: no sample and no complaint about the joint's name."""
+    from cvc_balance.bag.replay import read_inputs
+    path = write_input_bag(tmp_path / 'none.mcap', [], [], [], [(1, yaml.safe_dump(GANTRY))])
+    motion, layouts = read_inputs(Bag(path), 'gantry_joint')
+    assert len(motion.stamp) == 0 and motion.skipped == 0 and motion.joint_topic == \
+        '/joint_states'
+    assert [log for log, _ in layouts] == [1]
