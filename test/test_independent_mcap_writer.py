@@ -14,7 +14,7 @@ import struct
 import zlib
 
 from mcap.reader import make_reader
-from mcap.records import Chunk, ChunkIndex, Footer, MetadataIndex, Statistics, SummaryOffset
+from mcap.records import Chunk, ChunkIndex, Footer, MetadataIndex, Statistics
 from mcap.stream_reader import breakup_chunk, StreamReader
 import numpy as np
 import pytest
