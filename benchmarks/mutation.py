@@ -183,15 +183,20 @@ def prepare(work, module, tests, deselected=()):
     return present
 
 
-def run_module(name, work, children, tests=None, deselected=()):
-    """Run mutmut on one module; return its counts and the survivors' diffs."""
+def run_module(name, work, children, tests=None, deselected=(), mutants=()):
+    """
+    Run mutmut on one module; return its counts and the survivors' diffs.
+
+    ``mutants``: names (fnmatch patterns, e.g. ``*xǁBagǁ_walk__mutmut_*``) of the only
+    mutants tested; the others count as not checked.
+    """
     module, guarding = MODULES[name]
     present = prepare(work, module, tests or guarding, deselected)
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE='1', RERUN_TELEMETRY_ENABLED='false')
     started = time.monotonic()
     log = open(work / 'mutmut.log', 'w')
-    subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children)],
-                   cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
+    subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children),
+                    *mutants], cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
     seconds = time.monotonic() - started
     subprocess.run([sys.executable, '-m', 'mutmut', 'export-cicd-stats'], cwd=work, env=env,
                    stdout=log, stderr=subprocess.STDOUT)
@@ -204,7 +209,7 @@ def run_module(name, work, children, tests=None, deselected=()):
     survivors = []
     for line in results.splitlines():
         mutant, _, status = line.strip().rpartition(': ')
-        if mutant:
+        if mutant and status != 'not checked':
             diff = subprocess.run([sys.executable, '-m', 'mutmut', 'show', mutant], cwd=work,
                                   env=env, capture_output=True, text=True).stdout
             survivors.append((mutant, status, diff))
@@ -212,7 +217,7 @@ def run_module(name, work, children, tests=None, deselected=()):
         for mutant, status, diff in survivors:
             stream.write(f'## {mutant}: {status}\n{diff}\n')
     return {'module': module, 'tests': present, 'deselected': list(deselected),
-            'seconds': round(seconds, 1), **stats}
+            'mutants': list(mutants), 'seconds': round(seconds, 1), **stats}
 
 
 def main():
@@ -229,6 +234,10 @@ def main():
                              'docs/mutation.md with its results')
     parser.add_argument('--deselect', nargs='+', default=[], metavar='TEST',
                         help='tests (pytest node ids) left out besides DESELECT')
+    parser.add_argument('--mutants', nargs='+', default=[], metavar='PATTERN',
+                        help="only the mutants of these names (fnmatch patterns, as mutmut's "
+                             "names: '*xǁBagǁ_walk__mutmut_*' for a method, "
+                             "'*x_decode__mutmut_*' for a function)")
     args = parser.parse_args()
     unknown = [m for m in args.modules if m not in MODULES]
     if unknown:
@@ -237,7 +246,8 @@ def main():
     summary_path = args.work / 'summary.json'
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     for name in args.modules or list(MODULES):
-        row = run_module(name, args.work / name, args.children, args.tests, args.deselect)
+        row = run_module(name, args.work / name, args.children, args.tests, args.deselect,
+                         args.mutants)
         summary[name] = row
         args.work.mkdir(parents=True, exist_ok=True)
         summary_path.write_text(json.dumps(summary, indent=1))

@@ -23,7 +23,7 @@ import yaml
 
 from cvc_balance.bag.mcap_reader import BagError
 from cvc_balance.bag.mcap_writer import BagWriter, MessageBlock
-from cvc_balance.messages.cdr import string_message, wrench_stamped_layout
+from cvc_balance.messages.cdr import joint_state_layout, string_message, wrench_stamped_layout
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 WRENCH, STRING = 'geometry_msgs/msg/WrenchStamped', 'std_msgs/msg/String'
@@ -355,6 +355,11 @@ def test_blocks_are_cut_into_chunks_of_whole_samples(tmp_path):
         a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
         made = writer.block([(a, stator), (b, rotor)])
         assert (made.n, made.group_size) == (4, group)
+    with BagWriter(tmp_path / 'small.mcap', chunk_bytes=group - 1) as writer:
+        a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
+        assert writer.block([(a, stator), (b, rotor)]).n == 1     # at least one sample
+    with BagWriter(path, compression='', chunk_bytes=4 * group + group - 1) as writer:
+        a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
         block = MessageBlock([(a, stator), (b, rotor)], 12)
         i = np.arange(12)
         block.put(['0.sec', '1.sec'], i + 100, 12)
@@ -398,7 +403,7 @@ def test_a_block_filled_on_the_writers_thread_and_written_whole(tmp_path):
     """
     write_block(fill=...) with no count: every sample of the block, filled by ``fill``.
 
-    Five blocks in a row through one block object (its buffers reused), the fill setting
+    Five blocks in a row through one block object (its one buffer reused), the fill setting
     each buffer's fields; a block of 3 samples to chunks of 2: read back by the mcap
     library and rosbags, each sample as filled.
     """
@@ -406,7 +411,7 @@ def test_a_block_filled_on_the_writers_thread_and_written_whole(tmp_path):
     layout = wrench_stamped_layout('stator')
     with BagWriter(path, compression='zstd', chunk_bytes=2 * (31 + layout.size)) as writer:
         w = writer.add_channel('/w', WRENCH)
-        block = MessageBlock([(w, layout)], 3, buffers=2)
+        block = MessageBlock([(w, layout)], 3, buffers=1)
         for r in range(5):
             def fill(buffer, r=r):
                 buffer.put(['0.sec'], np.array([r, r, r]), 3)
@@ -442,12 +447,18 @@ def test_put_sets_fields_together_apart_and_as_one_value(tmp_path):
                   4, '<u8')
         block.put(['0.force_z'], np.array([0.5, 0.25]), 2)
         writer.write_block(block, [1, 2, 3, 4])
+        block.put(['0.sec', '0.nanosec'], np.array([7, 8]), 2)
+        block.put(['0.force_x', '0.force_y', '0.torque_z'], np.array([0.5, 1.5]), 2)
+        block.put(['0.force_z', '0.torque_x', '0.torque_y'], np.zeros(2), 2)
+        writer.write_block(block, [5, 6], 2)
     with open(path, 'rb') as stream:
         got = [wrench_values(m.data) for _, _, m in make_reader(stream).iter_messages()]
     assert got == [(40, 0, 'f', (1.0, 5.0, 0.5, -1.0, -1.0, 9.0)),
                    (40, 1, 'f', (2.0, 6.0, 0.25, -2.0, -2.0, 10.0)),
                    (40, 2, 'f', (3.0, 7.0, 0.0, -3.0, -3.0, 11.0)),
-                   (40, 3, 'f', (0.0, 0.0, 0.0, -4.0, -4.0, 0.0))]
+                   (40, 3, 'f', (0.0, 0.0, 0.0, -4.0, -4.0, 0.0)),
+                   (7, 7, 'f', (0.5, 0.5, 0.0, 0.0, 0.0, 0.5)),
+                   (8, 8, 'f', (1.5, 1.5, 0.0, 0.0, 0.0, 1.5))]
 
 
 def test_closing_twice_changes_nothing(tmp_path):
@@ -573,3 +584,32 @@ def test_written_chunks_leave_the_page_cache(tmp_path, monkeypatch):
         if k >= 8:
             expected.append(spans[k - 8])
     assert advised == [(start, length, os.POSIX_FADV_DONTNEED) for start, length in expected]
+
+
+def test_a_block_of_joint_states_whose_last_bytes_are_no_field(tmp_path):
+    """
+    JointState blocks (two joints; the empty effort's length after the last field).
+
+    Two blocks of 4 and 3 samples, decoded by rosbags: names, stamps, positions and
+    velocities as set, effort empty.
+    """
+    path = tmp_path / 'joints.mcap'
+    layout = joint_state_layout('base', ['a', 'bb'])
+    with BagWriter(path, compression='lz4') as writer:
+        joints = writer.add_channel('/joint_states', 'sensor_msgs/msg/JointState')
+        block = MessageBlock([(joints, layout)], 4, buffers=0)    # 0: one buffer all the same
+        for first, n in ((0, 4), (4, 3)):
+            k = np.arange(first, first + n)
+            block.put(['0.sec', '0.nanosec'], [k + 1, 1000 * k], n)
+            block.put(['0.position_0', '0.position_1'], [0.5 * k, -0.25 * k], n)
+            block.put(['0.velocity_0', '0.velocity_1'], [k + 0.125, k - 0.125], n)
+            writer.write_block(block, 10 * k, n)
+    got = []
+    with open(path, 'rb') as stream:
+        for _, _, m in make_reader(stream, validate_crcs=True).iter_messages():
+            state = TYPESTORE.deserialize_cdr(m.data, 'sensor_msgs/msg/JointState')
+            got.append((m.log_time, state.header.stamp.sec, state.header.stamp.nanosec,
+                        state.header.frame_id, list(state.name), state.position.tolist(),
+                        state.velocity.tolist(), state.effort.tolist()))
+    assert got == [(10 * k, k + 1, 1000 * k, 'base', ['a', 'bb'], [0.5 * k, -0.25 * k],
+                    [k + 0.125, k - 0.125], []) for k in range(7)]
