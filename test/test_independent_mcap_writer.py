@@ -358,6 +358,13 @@ def test_blocks_are_cut_into_chunks_of_whole_samples(tmp_path):
     with BagWriter(tmp_path / 'small.mcap', chunk_bytes=group - 1) as writer:
         a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
         assert writer.block([(a, stator), (b, rotor)]).n == 1     # at least one sample
+        block = MessageBlock([(a, stator), (b, rotor)], 3)
+        block.put(['0.force_x', '1.force_x'], np.array([1.0, 2.0, 3.0]), 3)
+        writer.write_block(block, [1, 2, 3])
+    with open(tmp_path / 'small.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        assert [(i.message_start_time, i.message_end_time)
+                for i in reader.get_summary().chunk_indexes] == [(1, 1), (2, 2), (3, 3)]
     with BagWriter(path, compression='', chunk_bytes=4 * group + group - 1) as writer:
         a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
         block = MessageBlock([(a, stator), (b, rotor)], 12)
@@ -418,14 +425,65 @@ def test_a_block_filled_on_the_writers_thread_and_written_whole(tmp_path):
                 buffer.put(['0.force_x', '0.torque_y'], [np.arange(3) + 10 * r,
                                                          -np.arange(3) - 10 * r], 3)
             writer.write_block(block, np.arange(3) + 100 * r, fill=fill)
+            writer.write_block(block, [], 0, fill=fill)     # nothing: the block stays usable
+
+        def fill_two(buffer):
+            buffer.put(['0.sec'], np.array([5, 5]), 2)
+            buffer.put(['0.force_x', '0.torque_y'], [np.arange(2) + 50, -np.arange(2) - 50], 2)
+        writer.write_block(block, np.arange(3) + 500, 2, fill=fill_two)
     with open(path, 'rb') as stream:
         reader = make_reader(stream, validate_crcs=True)
         got = [(m.log_time, wrench_values(m.data)) for _, _, m in
                reader.iter_messages(log_time_order=False)]
-        assert reader.get_summary().statistics.chunk_count == 10
+        assert reader.get_summary().statistics.chunk_count == 11
     assert got == [(100 * r + j, (r, 0, 'stator', (10.0 * r + j, 0.0, 0.0, 0.0, -10.0 * r - j,
                                                    0.0)))
-                   for r in range(5) for j in range(3)]
+                   for r in range(6) for j in range(3 if r < 5 else 2)]
+
+
+def test_a_block_holds_at_most_its_buffers(tmp_path):
+    """
+    A block of two buffers: the third write waits for the first buffer and fills it again.
+
+    The fills wait until released (the first two cannot be done when the second and third
+    writes take a buffer); the third write's fill gets the first write's buffer.
+    """
+    import threading
+    release, used = threading.Event(), []
+    layout = wrench_stamped_layout('s')
+    with BagWriter(tmp_path / 'two.mcap', compression='') as writer:
+        w = writer.add_channel('/w', WRENCH)
+        block = MessageBlock([(w, layout)], 2, buffers=2)
+
+        def fill(buffer):
+            used.append(buffer)
+            release.wait(5.0)
+            buffer.put(['0.force_x'], np.array([1.0, 2.0]), 2)
+        writer.write_block(block, [1, 2], fill=fill)
+        writer.write_block(block, [3, 4], fill=fill)
+        threading.Timer(0.02, release.set).start()
+        writer.write_block(block, [5, 6], fill=fill)
+    assert len(used) == 3 and used[0] is not used[1] and used[2] is used[0]
+
+
+def test_ids_are_the_ones_the_mcap_library_gives(tmp_path):
+    """Schema and channel ids: 1, 2, ... in the order registered, as mcap's Writer gives."""
+    from mcap.writer import Writer
+    theirs = Writer(io.BytesIO())
+    theirs.start()
+    expected = []
+    with BagWriter(tmp_path / 'ids.mcap') as writer:
+        schemas = {}
+        for topic, msg_type in (('/a', STRING), ('/b', WRENCH), ('/c', STRING), ('/d', WRENCH),
+                                ('/e', 'sensor_msgs/msg/JointState')):
+            if msg_type not in schemas:
+                schemas[msg_type] = theirs.register_schema(msg_type, 'ros2msg', b'')
+            expected.append((theirs.register_channel(topic, 'cdr', schemas[msg_type]),
+                             schemas[msg_type]))
+            assert writer.add_channel(topic, msg_type) == expected[-1][0]
+    with open(tmp_path / 'ids.mcap', 'rb') as stream:
+        channels = make_reader(stream).get_summary().channels
+    assert [(c.id, c.schema_id) for c in channels.values()] == expected
 
 
 def test_put_sets_fields_together_apart_and_as_one_value(tmp_path):
