@@ -14,7 +14,8 @@ import struct
 import zlib
 
 from mcap.reader import make_reader
-from mcap.records import Chunk, ChunkIndex, Footer, MetadataIndex, Statistics
+from mcap.records import (Chunk, ChunkIndex, Footer, MessageIndex, MetadataIndex,
+                          Statistics)
 from mcap.stream_reader import breakup_chunk, StreamReader
 import numpy as np
 import pytest
@@ -81,48 +82,94 @@ def wrench_values(data):
 
 def test_a_chunk_of_loose_messages_is_the_specifications_bytes(tmp_path):
     """
-    Uncompressed messages by write(): the chunk and its index, byte for byte by hand.
+    Uncompressed messages by write(): the chunk and its indexes, byte for byte by hand.
 
-    Three messages on two channels, log times out of order (the chunk spans their
+    Four messages on three channels, log times out of order (the chunk spans their
     minimum to their maximum); the chunk's CRC is zlib's of its records; each channel's
-    Message Index lists its messages' log times and offsets in write order.
+    Message Index lists its messages' log times and offsets in write order, and the chunk
+    index points at each.
     """
     path = tmp_path / 'loose.mcap'
-    notes = [string_message('first'), string_message('second, longer'), string_message('')]
+    notes = [string_message('first'), string_message('second, longer'), string_message(''),
+             string_message('fourth')]
     with BagWriter(path, compression='') as writer:
         a = writer.add_channel('/a', STRING)
         b = writer.add_channel('/b', STRING, latched=True)
+        c = writer.add_channel('/c', STRING)
         writer.write(a, 5_000, notes[0])
         writer.write(b, 3_000, notes[1])
         writer.write(a, 9_000, notes[2])
+        writer.write(c, 4_000, notes[3])
     data = path.read_bytes()
     records = records_by_hand(data)
     opcodes = [op for _, op, _ in records]
-    assert opcodes == [HEADER, METADATA, SCHEMA, CHANNEL, CHANNEL, CHUNK, MESSAGE_INDEX,
-                       MESSAGE_INDEX, METADATA, DATA_END, SCHEMA, CHANNEL, CHANNEL, STATISTICS,
-                       METADATA_INDEX, METADATA_INDEX, CHUNK_INDEX] + [SUMMARY_OFFSET] * 5 + \
+    assert opcodes == [HEADER, METADATA, SCHEMA] + [CHANNEL] * 3 + [CHUNK] + \
+        [MESSAGE_INDEX] * 3 + [METADATA, DATA_END, SCHEMA] + [CHANNEL] * 3 + \
+        [STATISTICS, METADATA_INDEX, METADATA_INDEX, CHUNK_INDEX] + [SUMMARY_OFFSET] * 5 + \
         [FOOTER]
     first = message_record(a, 5_000, notes[0])
     second = message_record(b, 3_000, notes[1])
     third = message_record(a, 9_000, notes[2])
-    inner = first + second + third
-    (chunk_at, _, chunk), (_, _, index_a), (_, _, index_b) = records[5:8]
+    fourth = message_record(c, 4_000, notes[3])
+    inner = first + second + third + fourth
+    (chunk_at, _, chunk), (_, _, index_a), (_, _, index_b), (_, _, index_c) = records[6:10]
     assert chunk_by_hand(chunk) == (3_000, 9_000, len(inner), zlib.crc32(inner), '', inner)
     assert index_a == index_record(a, [(5_000, 0), (9_000, len(first) + len(second))])[9:]
     assert index_b == index_record(b, [(3_000, len(first))])[9:]
+    assert index_c == index_record(c, [(4_000, len(inner) - len(fourth))])[9:]
     # The header and the data end, by hand.
     assert records[0][2] == struct.pack('<I', 4) + b'ros2' + struct.pack('<I', 11) + \
         b'cvc_balance'
-    assert records[9][2] == struct.pack('<I', 0)
+    assert records[11][2] == struct.pack('<I', 0)
     # The chunk index points at the chunk and at each channel's message index.
     index, = [r for r in parsed(data) if isinstance(r, ChunkIndex)]
     assert (index.message_start_time, index.message_end_time) == (3_000, 9_000)
     assert index.chunk_start_offset == chunk_at
     assert index.chunk_length == 9 + len(chunk)
-    assert index.message_index_offsets == {a: records[6][0], b: records[7][0]}
-    assert index.message_index_length == records[8][0] - records[6][0]
+    assert index.message_index_offsets == {a: records[7][0], b: records[8][0],
+                                           c: records[9][0]}
+    assert index.message_index_length == records[10][0] - records[7][0]
     assert (index.compression, index.compressed_size, index.uncompressed_size) == \
         ('', len(inner), len(inner))
+
+
+def indexed_messages(data):
+    """
+    Check every chunk's message indexes by hand; return how many entries they hold.
+
+    Each entry must point at a Message record of its channel and log time in the
+    chunk's records (decompressed by the mcap library), its offset counted by the spec.
+    """
+    records, checked = parsed(data), 0
+    for k, record in enumerate(records):
+        if not isinstance(record, Chunk):
+            continue
+        at, position = {}, 0
+        for inner in breakup_chunk(record, validate_crc=True):
+            at[position] = inner
+            position += 9 + 22 + len(inner.data)
+        for index in records[k + 1:]:
+            if not isinstance(index, MessageIndex):
+                break
+            for log_time, offset in index.records:
+                assert (at[offset].channel_id, at[offset].log_time) == \
+                    (index.channel_id, log_time)
+                checked += 1
+    return checked
+
+
+def test_blocks_of_the_same_size_over_other_channels_keep_their_own_indexes(tmp_path):
+    """Two blocks of two channels, in either order, written 2 samples at a time."""
+    path = tmp_path / 'two_blocks.mcap'
+    layout = wrench_stamped_layout('s')
+    with BagWriter(path, compression='') as writer:
+        a, b = writer.add_channel('/a', WRENCH), writer.add_channel('/b', WRENCH)
+        ab = MessageBlock([(a, layout), (b, layout)], 2)
+        ba = MessageBlock([(b, layout), (a, layout)], 2)
+        for k in range(3):
+            writer.write_block(ab, [10 * k, 10 * k + 1])
+            writer.write_block(ba, [10 * k + 5, 10 * k + 6])
+    assert indexed_messages(path.read_bytes()) == 24
 
 
 def test_the_summary_and_footer_point_where_the_spec_says(tmp_path):
@@ -187,6 +234,7 @@ def test_the_summary_and_footer_point_where_the_spec_says(tmp_path):
             assert (record.summary_start, record.summary_offset_start) == \
                 (summary_start, offsets_start)
     assert names == ['rosbag2', 'cvc_balance', 'rosbag2']
+    assert indexed_messages(data) == 17
 
 
 def test_metadata_records_say_what_the_file_holds(tmp_path):
