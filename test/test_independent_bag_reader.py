@@ -516,3 +516,196 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     ours = bag.messages(bag.channel('/joint_states', JOINT))
     assert len(ours) > 100 and ours == expected
     assert bag.problems == [said, 'file has no end of data (truncated recording?)']
+
+
+# -- files that are cut, damaged or no bag at all (issue 29, third session) ----------------
+
+def notes_bag(path, chunk_size=400, compression=CompressionType.ZSTD):
+    """Write 40 String messages on /n (and 10 on /m) with the mcap library; return the path."""
+    messages = []
+    for k in range(40):
+        messages.append(('/n', 1_000 + k, TYPESTORE.serialize_cdr(
+            TYPESTORE.types[STRING](data=f'note {k} ' + 'x' * (k % 9)), STRING).tobytes()))
+        if k % 4 == 0:
+            messages.append(('/m', 1_000 + k, TYPESTORE.serialize_cdr(
+                TYPESTORE.types[STRING](data=f'm {k}'), STRING).tobytes()))
+    return write_with_mcap_library(path, {'/n': STRING, '/m': STRING}, messages,
+                                   chunk_size=chunk_size, compression=compression)
+
+
+def indexed_messages(data, topic='/n'):
+    """(log time, bytes) of ``topic`` as the mcap library's indexed reader reads them."""
+    reader = make_reader(io.BytesIO(data), validate_crcs=True)
+    return [(m.log_time, bytes(m.data))
+            for _, c, m in reader.iter_messages(log_time_order=False) if c.topic == topic]
+
+
+def ours(path, topic='/n'):
+    """(Bag, its messages of ``topic``)."""
+    bag = Bag(path)
+    return bag, bag.messages(bag.channel(topic, STRING))
+
+
+def read_before_the_cut(data, topic='/n'):
+    """(log time, bytes) of ``topic`` the mcap library's stream reader reads before the cut."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    out, topics = [], {}
+    try:
+        for r in StreamReader(io.BytesIO(data)).records:
+            if isinstance(r, Channel):
+                topics[r.id] = r.topic
+            elif isinstance(r, Message) and topics[r.channel_id] == topic:
+                out.append((r.log_time, bytes(r.data)))
+    except (EndOfFile, struct.error):            # where the file ends
+        pass
+    return out
+
+
+def test_what_is_no_bag_is_refused_in_one_line(tmp_path):
+    """No file, a directory, an empty file, a text: the words a person reads."""
+    from cvc_balance.bag.mcap_reader import BagError
+    (tmp_path / 'empty.mcap').write_bytes(b'')
+    (tmp_path / 'text.mcap').write_text('name: not a bag\n')
+    for name, why in (('missing.mcap', 'cannot read bag: No such file or directory'),
+                      ('.', 'cannot read bag: Is a directory'),
+                      ('empty.mcap', 'not an MCAP file (no MCAP magic at the start)'),
+                      ('text.mcap', 'not an MCAP file (no MCAP magic at the start)')):
+        with pytest.raises(BagError) as refused:
+            Bag(tmp_path / name)
+        assert str(refused.value) == f'{tmp_path / name}: {why}'
+
+
+def test_a_file_cut_anywhere_says_where_and_keeps_what_came_before(tmp_path):
+    """
+    Cut inside a record's header, inside a chunk, after the data, inside the summary.
+
+    Each time the one line says where (bytes by hand from the top-level records) and the
+    messages are those the mcap library's stream reader reads before the cut; a cut in the
+    summary loses no message.
+    """
+    data = notes_bag(tmp_path / 'whole.mcap').read_bytes()
+    records = top_level(data)
+    chunks = [o for o, op, _ in records if op == 0x06]
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    summary = next(o for o, op, _ in records if o > data_end)
+    assert len(chunks) >= 4
+    for cut, said in (
+            (chunks[2] + 5, f'file ends inside a record header at byte {chunks[2]} '
+                            '(truncated recording?)'),
+            (chunks[2] + 30, f'file ends inside a record (opcode 0x06) at byte {chunks[2]} of '
+                             f'{chunks[2] + 30} (truncated recording?)'),
+            (data_end, 'file has no end of data (truncated recording?)'),
+            (summary + 12, f'file ends inside a record (opcode 0x{data[summary]:02x}) at byte '
+                           f'{summary} of {summary + 12}, in its summary (every message was '
+                           'read)')):
+        path = tmp_path / 'cut.mcap'
+        path.write_bytes(data[:cut])
+        bag, got = ours(path)
+        assert got == read_before_the_cut(data[:cut]), cut
+        assert bag.problems == [said]
+        assert bag.finished is False
+    assert read_before_the_cut(data[:summary + 12]) == indexed_messages(data)
+    bag, got = ours(tmp_path / 'whole.mcap')
+    assert bag.finished is True and bag.problems == [] and got == indexed_messages(data)
+
+
+def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(tmp_path):
+    """
+    A chunk's opcode flipped to a message's, a metadata record's and the data end's to a
+    kind no reader knows: the summary (found by the footer, the walk having missed the
+    data end) gives the chunk and the metadata record where they are.
+
+    Every message as the mcap library's indexed reader reads the damaged file (through the
+    summary: all of them), none taken for a message outside chunks; the metadata as written;
+    one line for the chunk.
+    """
+    path = tmp_path / 'meta.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=400, compression=CompressionType.LZ4)
+        writer.start(profile='ros2', library='mcap python')
+        schema = writer.register_schema(name=STRING, encoding='ros2msg', data=b'')
+        channel = writer.register_channel(topic='/n', message_encoding='cdr', schema_id=schema)
+        for k in range(40):
+            writer.add_message(channel, log_time=k, publish_time=k, sequence=k,
+                               data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](
+                                   data=f'note {k} ' + 'y' * k), STRING).tobytes())
+            if k == 20:
+                writer.add_metadata('machine', {'id': 'g-7', 'site': 'b'})
+        writer.finish()
+    data = bytearray(path.read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][2]
+    metadata = next(o for o, op, _ in records if op == 0x0C)
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    data[chunk], data[metadata], data[data_end] = 0x05, 0x7F, 0x7E
+    damaged = tmp_path / 'damaged.mcap'
+    damaged.write_bytes(bytes(data))
+    bag, got = ours(damaged)
+    assert got == indexed_messages(bytes(data)) == indexed_messages(path.read_bytes())
+    assert len(got) == 40 and bag.loose_messages() == []
+    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+    assert [(offset, name, values) for offset, name, values, _ in bag.metadata] == \
+        [(metadata, 'machine', {'id': 'g-7', 'site': 'b'})]
+    summary = make_reader(io.BytesIO(bytes(data))).get_summary()
+    assert bag.summary_records[0x08] == len(summary.chunk_indexes) >= 4
+    assert bag.summary_records[0x0D] == 1 and bag.finished
+
+
+@pytest.mark.parametrize('damage, said', [
+    ('crc', 'CRC mismatch'), ('size', 'size differs from the chunk header'),
+    ('compression', "unknown compression 'zstx'"), ('no crc', None)])
+def test_a_chunk_that_does_not_decode_costs_only_itself(damage, said, tmp_path):
+    """
+    A chunk's CRC, uncompressed size or compression damaged: its messages are lost, said
+    once; the others are read (as the mcap library reads them from the file without that
+    chunk). A CRC of 0 means none was computed: the chunk is read.
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    at, length = [(o, n) for o, op, n in records if op == 0x06][1]
+    following = next(o for o, op, _ in records if o > at and op not in (0x06, 0x07))
+    following = min(following, [o for o, op, _ in records if op == 0x06][2])
+    if damage == 'crc':
+        data[at + 9 + 24] ^= 0x01
+    elif damage == 'size':
+        struct.pack_into('<Q', data, at + 9 + 16, struct.unpack_from('<Q', data, at + 25)[0] + 1)
+    elif damage == 'compression':
+        assert data[at + 9 + 32:at + 9 + 36] == b'zstd'
+        data[at + 9 + 35:at + 9 + 36] = b'x'
+    else:
+        struct.pack_into('<I', data, at + 9 + 24, 0)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    if said is None:
+        assert got == indexed_messages(bytes(data)) and bag.problems == []
+        return
+    whole = bytes(data)
+    assert got == stream_messages(whole[:at] + whole[following:], '/n')
+    assert len(got) < 40
+    assert bag.problems == [f'chunk at byte {at} unreadable ({said}); skipped']
+    bag.check_chunks()
+    assert len(bag.problems) == 1
+
+
+def test_a_message_index_that_points_elsewhere_walks_its_chunk(tmp_path):
+    """
+    An entry of a chunk's message index moved by one byte: said, the chunk walked, every
+    message read (as the mcap library's stream reader, which needs no index, reads them).
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07 and
+                 struct.unpack_from('<H', data, o + 9)[0] == 1)
+    offset, = struct.unpack_from('<Q', data, index + 9 + 6 + 8 + 16)   # its second entry
+    struct.pack_into('<Q', data, index + 9 + 6 + 8 + 16, offset + 1)
+    path = tmp_path / 'moved.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == stream_messages(bytes(data), '/n') and len(got) == 40
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /n does not point at its '
+                            'messages; chunk walked instead']
