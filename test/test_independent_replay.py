@@ -191,3 +191,127 @@ def test_a_joint_state_topic_without_messages_gives_no_samples(tmp_path):
     assert len(motion.stamp) == 0 and motion.skipped == 0 and motion.joint_topic == \
         '/joint_states'
     assert [log for log, _ in layouts] == [1]
+
+
+def test_every_output_wrench_is_pinocchios(replayed):
+    """
+    Each output topic's six numbers at every sample, by Pinocchio's RNEA at the input's
+    angle and speed and the ramp's acceleration (2 rad/s^2; the estimate's slope is
+    exact on a ramp from the second sample on): the bearing load and each support's (force
+    and moment, stator frame), the unbalance (rotor frame: U omega^2 and the couple) and
+    the drive torque. Held to 1e-9 of each topic's largest value (measured 1e-13).
+    """
+    from independent import PinocchioRotor
+    stamps, omega, out, _ = replayed
+    rotor = PinocchioRotor(GANTRY)
+    angle = np.remainder(1.0 * (stamps - stamps[0]) * 1e-9 + (stamps - stamps[0])**2 * 1e-18
+                         + math.pi, 2 * math.pi) - math.pi
+    expected = {topic: [] for topic in out if topic != '/layout'}
+    for q, w in zip(angle[1:], omega[1:]):
+        ref = rotor.loads(float(q), float(w), 2.0)
+        expected['/bearing_load'].append(np.concatenate([ref['force'], ref['moment']]))
+        for name, (force, moment) in ref['supports'].items():
+            expected[f'/supports/{name}/load'].append(np.concatenate([force, moment]))
+        expected['/unbalance'].append(np.concatenate(rotor.unbalance(float(w))))
+        expected['/drive_torque'].append([0, 0, 0, 0, 0, ref['drive_torque']])
+    for topic, rows in expected.items():
+        got = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                         m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
+                        for m in (TYPESTORE.deserialize_cdr(data, WRENCH)
+                                  for _, _, data in out[topic][1:])])
+        rows = np.array(rows, float)
+        assert np.abs(got - rows).max() <= 1e-9 * np.abs(rows).max(), topic
+
+
+def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_path):
+    """
+    A ramp (3 rad/s^2 for 1 s), then a steady 4 rad/s for 2 s: 20 default time constants
+    (0.1 s) after the corner the drive torque is Pinocchio's at alpha 0, to 1e-6 of the
+    ramp's own torque I_zz 3 rad/s^2 (measured 1e-7; a time constant of 1.1 s leaves a
+    tenth of the ramp's acceleration there).
+    """
+    from independent import PinocchioRotor
+    rate = 200.0
+    t = np.arange(int(3.0 * rate)) / rate
+    omega = np.where(t < 1.0, 1.0 + 3.0 * t, 4.0)
+    theta = np.where(t < 1.0, t + 1.5 * t * t, 2.5 + 4.0 * (t - 1.0))
+    angle = np.remainder(theta + math.pi, 2 * math.pi) - math.pi
+    stamps = 5 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    bag = write_input_bag(tmp_path / 'corner.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, tmp_path / 'out.mcap')
+    with open(tmp_path / 'out.mcap', 'rb') as stream:
+        torques = [TYPESTORE.deserialize_cdr(m.data, WRENCH).wrench.torque.z
+                   for _, c, m in make_reader(stream).iter_messages(log_time_order=False)
+                   if c.topic == '/drive_torque']
+    rotor = PinocchioRotor(GANTRY)
+    expected = [rotor.loads(float(q), float(w), 0.0)['drive_torque']
+                for q, w in zip(angle, omega)]
+    ramp_torque = abs(rotor.loads(0.0, 4.0, 3.0)['drive_torque'] -
+                      rotor.loads(0.0, 4.0, 0.0)['drive_torque'])
+    assert len(torques) == len(t) and ramp_torque > 100.0
+    assert max(abs(a - b) for a, b in zip(torques[-10:], expected[-10:])) <= 1e-6 * ramp_torque
+
+
+def joint_bag(path, stamps, messages):
+    """A bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
+    from cvc_balance.bag.mcap_writer import BagWriter
+    joint = 'sensor_msgs/msg/JointState'
+    types = TYPESTORE.types
+    with BagWriter(path) as writer:
+        layout = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
+        writer.write(layout, int(stamps[0]) - 1000, TYPESTORE.serialize_cdr(
+            types['std_msgs/msg/String'](data=yaml.safe_dump(GANTRY)),
+            'std_msgs/msg/String').tobytes())
+        channel = writer.add_channel('/joint_states', joint)
+        for ns, (names, position, velocity) in zip(stamps, messages):
+            msg = types[joint](header=types['std_msgs/msg/Header'](
+                stamp=types['builtin_interfaces/msg/Time'](sec=int(ns) // 10**9,
+                                                           nanosec=int(ns) % 10**9),
+                frame_id=''), name=list(names), position=np.array(position, float),
+                velocity=np.array(velocity, float), effort=np.zeros(0))
+            writer.write(channel, int(ns), TYPESTORE.serialize_cdr(msg, joint).tobytes())
+    return path
+
+
+def test_joint_states_without_the_joint_are_counted_and_named(tmp_path):
+    """
+    Of 12 JointStates: 8 of the joint, 3 naming two other joints, 1 of the joint without a
+    velocity: 12 samples, 8 accepted, 3 skipped (said with the joints they name, in
+    order), 1 rejected. Only other joints: refused, naming them.
+    """
+    stamps = 5 * 10**9 + 5_000_000 * np.arange(12)
+    messages = [(['gantry_joint'], [0.01 * k], [2.0]) for k in range(12)]
+    for k in (3, 6, 9):
+        messages[k] = (['wheel', 'arm'], [0.0, 1.0], [0.0, 0.0])
+    messages[10] = (['gantry_joint'], [0.1], [])
+    bag = joint_bag(tmp_path / 'mixed.mcap', stamps, messages)
+    summary = replay(bag)
+    assert (summary.samples, summary.accepted, summary.skipped, summary.rejected) == \
+        (12, 8, 3, 1)
+    assert summary.skipped_reason == ("3 JointState messages without joint 'gantry_joint' "
+                                      '(they name: arm, wheel)')
+    others = joint_bag(tmp_path / 'others.mcap', stamps[:2], messages[3:4] * 2)
+    with pytest.raises(BagError) as refused:
+        replay(others)
+    assert str(refused.value) == (f"{others}: no /joint_states message carries joint "
+                                  "'gantry_joint' (they name: arm, wheel); choose the joint "
+                                  'with --joint-name')
+
+
+def test_replay_reads_the_topics_it_is_given(tmp_path):
+    """replay(names=...): the keyphasor on /tach (4 rev/s), not the default /keyphasor (2)."""
+    from cvc_balance.bag.inputs import InputTopics
+    from cvc_balance.bag.mcap_writer import BagWriter
+    from tach_bags import time_reference
+    path = tmp_path / 'tach.mcap'
+    start = 3 * 10**9
+    with BagWriter(path) as writer:
+        for topic, period in (('/tach', 250_000_000), ('/keyphasor', 500_000_000)):
+            channel = writer.add_channel(topic, 'sensor_msgs/msg/TimeReference')
+            for k in range(12):
+                ns = start + k * period
+                writer.write(channel, ns + 1_000_000, time_reference(ns, ns + 1_000_000))
+    summary = replay(path, layout_file=GANTRY_FILE, names=InputTopics(keyphasor='/tach'))
+    (segment,) = summary.segments
+    assert segment.max_speed == pytest.approx(8 * math.pi, rel=1e-9)
