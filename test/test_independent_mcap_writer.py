@@ -719,3 +719,27 @@ def test_a_block_of_joint_states_whose_last_bytes_are_no_field(tmp_path):
                         state.velocity.tolist(), state.effort.tolist()))
     assert got == [(10 * k, k + 1, 1000 * k, 'base', ['a', 'bb'], [0.5 * k, -0.25 * k],
                     [k + 0.125, k - 0.125], []) for k in range(7)]
+
+
+def test_chunks_go_out_in_order_when_a_later_one_is_packed_first(tmp_path):
+    """
+    The first block's chunk is packed last (its fill waits for the later writes): the
+    file still holds the chunks in the order written, as the chunk indexes list them.
+    """
+    import threading
+    release = threading.Event()
+    layout = wrench_stamped_layout('s')
+    path = tmp_path / 'order.mcap'
+    with BagWriter(path, compression='') as writer:
+        w = writer.add_channel('/w', WRENCH)
+        first, later = (MessageBlock([(w, layout)], 1) for _ in range(2))
+        writer.write_block(first, [1], fill=lambda buffer: release.wait(5.0))
+        for k in range(2, 6):
+            writer.write_block(later, [k])
+        threading.Timer(0.05, release.set).start()
+    records = records_by_hand(path.read_bytes())
+    assert [chunk_by_hand(body)[0] for _, op, body in records if op == CHUNK] == [1, 2, 3, 4, 5]
+    with open(path, 'rb') as stream:
+        indexes = make_reader(stream).get_summary().chunk_indexes
+    assert [(i.message_start_time, i.chunk_start_offset) for i in indexes] == \
+        [(k, at) for k, (at, op, _) in zip(range(1, 6), [r for r in records if r[1] == CHUNK])]

@@ -163,17 +163,9 @@ def test_a_keyphasor_named_on_its_own_topic_is_the_motion(tmp_path):
     (held to 1e-9).
     """
     from cvc_balance.bag.inputs import InputTopics
-    from cvc_balance.bag.mcap_writer import BagWriter
     from cvc_balance.bag.replay import read_inputs
-    from tach_bags import time_reference
-    path = tmp_path / 'tach.mcap'
+    path = tach_bag(tmp_path / 'tach.mcap')
     start = 3 * 10**9
-    with BagWriter(path) as writer:
-        for topic, period in (('/tach', 250_000_000), ('/keyphasor', 500_000_000)):
-            channel = writer.add_channel(topic, 'sensor_msgs/msg/TimeReference')
-            for k in range(12):
-                ns = start + k * period
-                writer.write(channel, ns + 1_000_000, time_reference(ns, ns + 1_000_000))
     motion, layouts = read_inputs(Bag(path), 'gantry_joint', InputTopics(keyphasor='/tach'))
     assert layouts == [] and len(motion.stamp) >= 11 * 8
     turns = (motion.stamp - start) / 250_000_000
@@ -299,19 +291,59 @@ def test_joint_states_without_the_joint_are_counted_and_named(tmp_path):
                                   'with --joint-name')
 
 
-def test_replay_reads_the_topics_it_is_given(tmp_path):
-    """replay(names=...): the keyphasor on /tach (4 rev/s), not the default /keyphasor (2)."""
-    from cvc_balance.bag.inputs import InputTopics
+def tach_bag(path, missed=()):
+    """TimeReference marks on /tach every 0.25 s and on /keyphasor every 0.5 s (12 each)."""
     from cvc_balance.bag.mcap_writer import BagWriter
     from tach_bags import time_reference
-    path = tmp_path / 'tach.mcap'
     start = 3 * 10**9
     with BagWriter(path) as writer:
         for topic, period in (('/tach', 250_000_000), ('/keyphasor', 500_000_000)):
             channel = writer.add_channel(topic, 'sensor_msgs/msg/TimeReference')
             for k in range(12):
+                if topic == '/tach' and k in missed:
+                    continue
                 ns = start + k * period
                 writer.write(channel, ns + 1_000_000, time_reference(ns, ns + 1_000_000))
+    return path
+
+
+def test_replay_reads_the_topics_it_is_given(tmp_path):
+    """
+    replay(names=...): the keyphasor on /tach (4 rev/s), not the default /keyphasor (2);
+    a mark missed on /tach is put back and said among the replay's problems.
+    """
+    from cvc_balance.bag.inputs import InputTopics
+    path = tach_bag(tmp_path / 'tach.mcap', missed=(6,))
     summary = replay(path, layout_file=GANTRY_FILE, names=InputTopics(keyphasor='/tach'))
     (segment,) = summary.segments
     assert segment.max_speed == pytest.approx(8 * math.pi, rel=1e-9)
+    said = [p for p in summary.problems if p.startswith('keyphasor /tach: ')]
+    assert len(said) == 1 and ' 1 missed (put back), 0 doubled (dropped)' in said[0]
+
+
+def test_stamps_ahead_of_the_log_times_by_more_than_max_stamp_jump(tmp_path):
+    """
+    From the 100th sample on the stamps run 0.5 s ahead of the log times: within the
+    default max_stamp_jump (1 s) every sample is taken; with 0.25 s the replay takes
+    what the stamp gate takes of those stamps and log times (in s), fewer.
+    """
+    from cvc_balance.physics.motion import gate_samples
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=1.0)
+    log_times = stamps.copy()
+    stamps[100:] += 500_000_000
+    bag = write_input_bag(tmp_path / 'ahead.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    from cvc_balance.bag.mcap_writer import BagWriter
+    relogged = tmp_path / 'relogged.mcap'
+    source = Bag(bag)
+    with BagWriter(relogged) as writer:       # the same messages at the earlier log times
+        for channel in source.channels.values():
+            out = writer.add_channel(channel.topic, channel.msg_type)
+            for k, (log_time, data) in enumerate(source.messages(channel)):
+                writer.write(out, int(log_times[k]) if channel.topic == '/joint_states'
+                             else log_time, data)
+    assert replay(relogged).accepted == 200
+    accepted, _ = gate_samples(stamps * 1e-9, angle, omega, 1000.0, 0.25, log_times * 1e-9)
+    strict = replay(relogged, max_stamp_jump=0.25)
+    assert strict.accepted == int(accepted.sum()) < 200
+    assert strict.rejected == 200 - strict.accepted
