@@ -709,3 +709,119 @@ def test_a_message_index_that_points_elsewhere_walks_its_chunk(tmp_path):
     assert got == stream_messages(bytes(data), '/n') and len(got) == 40
     assert bag.problems == [f'chunk at byte {chunk}: message index of /n does not point at its '
                             'messages; chunk walked instead']
+
+
+def joint_rows_by_rosbags(path, joint='gantry_joint', skip=None):
+    """
+    ((stamp, log time, angle, speed) of each JointState rosbags decodes, by log time;
+    how many it cannot decode), from the mcap library's reading of /joint_states; those
+    naming ``skip`` left out.
+    """
+    from rosbags.serde import SerdeError
+    rows, failed = [], 0
+    with open(path, 'rb') as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+            if channel.topic != '/joint_states':
+                continue
+            try:
+                m = TYPESTORE.deserialize_cdr(message.data, JOINT)
+            except SerdeError:
+                failed += 1
+                continue
+            if skip in m.name:
+                continue
+            i = list(m.name).index(joint)
+            rows.append((m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, message.log_time,
+                         m.position[i], m.velocity[i]))
+    return sorted(rows, key=lambda row: row[1]), failed
+
+
+@pytest.mark.parametrize('strided', [True, False], ids=['strided', 'gathered'])
+def test_joint_states_of_one_length_and_other_layouts_are_told_apart(strided, tmp_path):
+    """
+    JointStates of one length (104 bytes) whose joint is elsewhere, and unreadable ones.
+
+    Kinds in a seeded random order: the joint first or second of two names, and two
+    positions and speeds; one position and three speeds; three positions and one speed;
+    a message whose name count says 1000 (unreadable: rejected); one whose second name
+    differs from the joint's in its last letter (skipped). One chunk, the
+    records one after the other (``strided``: read through strided views) or between
+    String messages of other lengths (gathered; log times a permutation starting with the
+    smallest: the message index lists them in that order). Every row equals rosbags'
+    decoding (the joint picked by name), in log-time order; the unreadable ones counted;
+    nothing else said.
+    """
+    rng = np.random.default_rng(5)
+    kinds = np.concatenate([[1], rng.integers(0, 6, 63)])   # the first group's: every kind
+    log_times = 1_000 + (np.arange(64) if strided else           # the index's order
+                         np.concatenate([[0], 1 + rng.permutation(63)]))
+    messages, expected, bad, skipped = [], [], 0, 0
+    for n, (kind, log) in enumerate(zip(kinds.tolist(), log_times.tolist())):
+        q, w = 0.01 * n - 0.3, 2.0 + 0.5 * n
+        names, position, velocity = [(['gantry_joint', 'tb'], [q, 9.0], [w, 8.0]),
+                                     (['tb', 'gantry_joint'], [9.0, q], [8.0, w]),
+                                     (['gantry_joint', 'tb'], [q], [w, 8.0, 7.0]),
+                                     (['gantry_joint', 'tb'], [q, 9.0, 8.0], [w]),
+                                     (['gantry_joint', 'tb'], [q, 9.0], [w, 8.0]),
+                                     (['tb', 'gantry_joinx'], [9.0, q], [8.0, w])][kind]
+        data = bytearray(joint_state(100 + n, 7 * n, 'f', names, position, velocity))
+        assert len(data) == 104
+        if kind == 4:
+            struct.pack_into('<I', data, 20, 1000)        # the name count
+            bad += 1
+        elif kind == 5:
+            skipped += 1
+        else:
+            expected.append(((100 + n) * 10**9 + 7 * n, log, q, w))
+        messages.append(('/joint_states', log, bytes(data)))
+        if not strided:
+            messages.append(('/note', log, TYPESTORE.serialize_cdr(
+                TYPESTORE.types[STRING](data='x' * (n % 7)), STRING).tobytes()))
+    path = write_with_mcap_library(tmp_path / 'joints.mcap',
+                                   {'/joint_states': JOINT, '/note': STRING}, messages,
+                                   chunk_size=1 << 20)
+    expected.sort(key=lambda row: row[1])
+    assert joint_rows_by_rosbags(path, skip='gantry_joinx') == (expected, bad) and bad >= 5
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == expected
+    assert (motion.rejected, motion.skipped) == (bad, skipped) and skipped >= 5
+    assert motion.joints_seen == ['gantry_joinx', 'tb']
+    assert motion.reasons == [f'{bad} /joint_states messages not readable as JointState with '
+                              'position and velocity']
+    good = write_with_mcap_library(tmp_path / 'good.mcap', {'/joint_states': JOINT},
+                                   [m for m, k in zip(messages[::1 if strided else 2], kinds)
+                                    if k < 4])
+    motion = joint_samples(Bag(good), Bag(good).channel('/joint_states', JOINT), 'gantry_joint')
+    assert len(motion.stamp) == len(expected) and motion.reasons == [] and \
+        motion.rejected == 0
+
+
+def test_more_publishers_in_a_chunk_than_are_gathered_at_once(tmp_path):
+    """
+    Twenty publishers (frames of 0 to 19 letters) on one topic in one chunk: the first 16
+    layouts gathered at once, the others message by message; every row as rosbags decodes
+    it, the one unreadable message counted.
+    """
+    from cvc_balance.bag.mcap_reader import LAYOUTS
+    assert LAYOUTS == 16
+    rng = np.random.default_rng(8)
+    messages, expected = [], []
+    for n, publisher in enumerate(rng.integers(0, 20, 200).tolist()):
+        q, w = 0.001 * n, 1.0 + n
+        data = joint_state(50 + n, n, 'f' * publisher, ['gantry_joint'], [q], [w])
+        if n == 150:
+            data = data[:40]                   # a message cut short: unreadable
+        else:
+            expected.append(((50 + n) * 10**9 + n, 5_000 + n, q, w))
+        messages.append(('/joint_states', 5_000 + n, data))
+    path = write_with_mcap_library(tmp_path / 'many.mcap', {'/joint_states': JOINT},
+                                   messages, chunk_size=1 << 20)
+    assert joint_rows_by_rosbags(path) == (expected, 1)
+    bag = Bag(path)
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == expected
+    assert (motion.rejected, motion.skipped) == (1, 0)
