@@ -825,3 +825,149 @@ def test_more_publishers_in_a_chunk_than_are_gathered_at_once(tmp_path):
     assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
                     motion.omega.tolist())) == expected
     assert (motion.rejected, motion.skipped) == (1, 0)
+
+
+def built(*records):
+    """The bytes of ``records`` (the mcap library's record classes), one after the other."""
+    from mcap.data_stream import RecordBuilder
+    out = b''
+    for record in records:
+        builder = RecordBuilder()
+        record.write(builder)
+        out += builder.end()
+    return out
+
+
+def string_record(channel, log_time, text):
+    """A Message record (the mcap library's) of a std_msgs/String serialised by rosbags."""
+    from mcap.records import Message
+    return Message(channel_id=channel, sequence=0, log_time=log_time, publish_time=log_time,
+                   data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data=text),
+                                                STRING).tobytes())
+
+
+def hand_built_file(chunks, loose_before=(), loose_after=(), compress=None, crc=True,
+                    indexes=True, summary=False):
+    """
+    A recording built record by record (the mcap library's records): Header, Schema,
+    Channels 1 (/n) and 2 (/m), loose messages, chunks of messages ({id: [(time, text)]}
+    each; compressed by ``compress`` (name, function) if given, their CRC or 0, with
+    message indexes or not), loose messages, DataEnd, a summary of the Schema and the
+    Channels (``summary``) or none, the Footer.
+    """
+    import zlib
+    from mcap.records import Channel, Chunk, DataEnd, Footer, Header, MessageIndex, Schema
+    out = MAGIC + built(Header(profile='ros2', library='by hand'),
+                        Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                        Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                                metadata={}),
+                        Channel(id=2, schema_id=1, topic='/m', message_encoding='cdr',
+                                metadata={}))
+    out += built(*(string_record(1, t, text) for t, text in loose_before))
+    for chunk in chunks:
+        records, index = b'', {}
+        for channel, messages in chunk.items():
+            for t, text in messages:
+                index.setdefault(channel, []).append((t, len(records)))
+                records += built(string_record(channel, t, text))
+        name, pack = compress or ('', lambda data: data)
+        times = [t for messages in chunk.values() for t, _ in messages]
+        out += built(Chunk(message_start_time=min(times), message_end_time=max(times),
+                           uncompressed_size=len(records),
+                           uncompressed_crc=zlib.crc32(records) if crc else 0,
+                           compression=name, data=pack(records)))
+        if indexes:
+            out += built(*(MessageIndex(channel_id=c, records=entries)
+                           for c, entries in index.items()))
+    out += built(*(string_record(1, t, text) for t, text in loose_after))
+    out += built(DataEnd(data_section_crc=0))
+    start = len(out) if summary else 0
+    if summary:
+        out += built(Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                     *(Channel(id=i, schema_id=1, topic=topic, message_encoding='cdr',
+                               metadata={}) for i, topic in ((1, '/n'), (2, '/m'))))
+    return out + built(Footer(summary_start=start, summary_offset_start=0,
+                              summary_crc=0)) + MAGIC
+
+
+MAGIC = b'\x89MCAP0\r\n'
+
+
+def test_messages_outside_chunks_come_in_file_order(tmp_path):
+    """
+    Loose messages before, between (none) and after chunks, and chunks without a message
+    of one channel: every channel's messages in file order, as the mcap library's stream
+    reader reads them, with and without message indexes (and then with the channels in
+    a summary: the chunks are walked only when read).
+    """
+    for indexes, summary in ((True, False), (False, False), (False, True)):
+        data = hand_built_file([{1: [(20, 'c1'), (21, 'c2')], 2: [(22, 'm1')]},
+                                {2: [(30, 'm2')]}, {1: [(40, 'd1')]}],
+                               loose_before=[(10, 'a'), (11, 'b')],
+                               loose_after=[(50, 'e')], indexes=indexes, summary=summary)
+        path = tmp_path / 'loose.mcap'
+        path.write_bytes(data)
+        bag = Bag(path)
+        assert bag.problems == []
+        for topic, texts in (('/n', ['a', 'b', 'c1', 'c2', 'd1', 'e']), ('/m', ['m1', 'm2'])):
+            theirs = read_before_the_cut(data, topic)
+            assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in theirs] == texts
+            assert bag.messages(bag.channel(topic, STRING)) == theirs, (topic, indexes)
+
+
+def test_a_zstd_chunk_without_its_content_size_and_a_chunk_without_a_crc(tmp_path):
+    """
+    A zstd frame that does not state its size (the chunk record does) and a chunk whose
+    CRC is 0 (none computed): both read, as the mcap library reads them.
+    """
+    import zstandard
+    pack = zstandard.ZstdCompressor(write_content_size=False).compress
+    data = hand_built_file([{1: [(1, 'one'), (2, 'two')]}, {1: [(3, 'three')]}],
+                           compress=('zstd', pack), crc=False)
+    path = tmp_path / 'sizeless.mcap'
+    path.write_bytes(data)
+    bag = Bag(path)
+    assert bag.problems == [] and [c.crc for c in bag.chunks] == [0, 0]
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(data)
+    assert len(read_before_the_cut(data)) == 3
+
+
+def test_a_chunk_without_a_crc_found_by_its_chunk_index(tmp_path):
+    """
+    test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes with a CRC of 0
+    in the chunk the walk cannot take: its records are checked whole instead, and read.
+    """
+    path = notes_bag(tmp_path / 'whole.mcap', compression=CompressionType.NONE)
+    data = bytearray(path.read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][2]
+    struct.pack_into('<I', data, chunk + 9 + 24, 0)
+    data[chunk] = 0x05
+    damaged = tmp_path / 'damaged.mcap'
+    damaged.write_bytes(bytes(data))
+    bag, got = ours(damaged)
+    assert got == indexed_messages(path.read_bytes()) and len(got) == 40
+    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+
+
+def test_a_message_index_naming_a_channel_not_in_its_chunk(tmp_path):
+    """
+    The second chunk's message index of /n relabelled /m (whose messages the chunk lacks):
+    /m read first walks that chunk (said); then both channels are whole, as the mcap
+    library's stream reader reads them.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a')], 2: [(2, 'm')]}, {1: [(3, 'b')]},
+                                      {2: [(4, 'n')], 1: [(5, 'c')]}]))
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07)
+    struct.pack_into('<H', data, index + 9, 2)
+    path = tmp_path / 'relabelled.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    assert bag.messages(bag.channel('/m', STRING)) == read_before_the_cut(bytes(data), '/m')
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(bytes(data), '/n')
+    assert len(read_before_the_cut(bytes(data), '/n')) == 3
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /m does not point at its '
+                            'messages; chunk walked instead']
