@@ -597,6 +597,9 @@ def test_a_file_cut_anywhere_says_where_and_keeps_what_came_before(tmp_path):
             (chunks[2] + 30, f'file ends inside a record (opcode 0x06) at byte {chunks[2]} of '
                              f'{chunks[2] + 30} (truncated recording?)'),
             (data_end, 'file has no end of data (truncated recording?)'),
+            (chunks[3] - 5, f'file ends inside a record (opcode 0x07) at byte '
+                            f'{max(o for o, _, _ in records if o < chunks[3] - 5)} of '
+                            f'{chunks[3] - 5} (truncated recording?)'),
             (summary + 12, f'file ends inside a record (opcode 0x{data[summary]:02x}) at byte '
                            f'{summary} of {summary + 12}, in its summary (every message was '
                            'read)')):
@@ -607,19 +610,27 @@ def test_a_file_cut_anywhere_says_where_and_keeps_what_came_before(tmp_path):
         assert bag.problems == [said]
         assert bag.finished is False
     assert read_before_the_cut(data[:summary + 12]) == indexed_messages(data)
+    # A record of no body (a kind no reader knows) ending exactly at the cut: read.
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(data[:chunks[2]] + struct.pack('<BQ', 0x80, 0))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(data[:chunks[2]])
+    assert bag.problems == ['file has no end of data (truncated recording?)']
     bag, got = ours(tmp_path / 'whole.mcap')
     assert bag.finished is True and bag.problems == [] and got == indexed_messages(data)
 
 
-def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(tmp_path):
+@pytest.mark.parametrize('data_end', ['whole', 'flipped'])
+def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(data_end, tmp_path):
     """
-    A chunk's opcode flipped to a message's, a metadata record's and the data end's to a
-    kind no reader knows: the summary (found by the footer, the walk having missed the
-    data end) gives the chunk and the metadata record where they are.
+    Two chunks' opcodes flipped to a message's and a metadata record's to a kind no reader
+    knows (and the data end's: the summary then found by the footer, the walk having
+    missed it): the summary gives the chunks and the metadata record where they are.
 
     Every message as the mcap library's indexed reader reads the damaged file (through the
-    summary: all of them), none taken for a message outside chunks; the metadata as written;
-    one line for the chunk.
+    summary: all of them), none taken for a message outside chunks; both metadata records
+    (the first found by its index, the second by the walk), in file order, read once; one
+    line for the chunks.
     """
     path = tmp_path / 'meta.mcap'
     with open(path, 'wb') as stream:
@@ -631,27 +642,64 @@ def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(tmp_path
             writer.add_message(channel, log_time=k, publish_time=k, sequence=k,
                                data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](
                                    data=f'note {k} ' + 'y' * k), STRING).tobytes())
-            if k == 20:
-                writer.add_metadata('machine', {'id': 'g-7', 'site': 'b'})
+            if k in (10, 30):
+                writer.add_metadata('zeta' if k == 10 else 'alpha', {'id': f'g-{k}'})
         writer.finish()
     data = bytearray(path.read_bytes())
     records = top_level(bytes(data))
-    chunk = [o for o, op, _ in records if op == 0x06][2]
-    metadata = next(o for o, op, _ in records if op == 0x0C)
-    data_end = next(o for o, op, _ in records if op == 0x0F)
-    data[chunk], data[metadata], data[data_end] = 0x05, 0x7F, 0x7E
+    chunks = [o for o, op, _ in records if op == 0x06]
+    metadata = [o for o, op, _ in records if op == 0x0C]
+    data_end_at = next(o for o, op, _ in records if op == 0x0F)
+    data[chunks[1]], data[chunks[3]], data[metadata[0]] = 0x05, 0x05, 0x7F
+    if data_end == 'flipped':
+        data[data_end_at] = 0x7E
     damaged = tmp_path / 'damaged.mcap'
     damaged.write_bytes(bytes(data))
     bag, got = ours(damaged)
     assert got == indexed_messages(bytes(data)) == indexed_messages(path.read_bytes())
     assert len(got) == 40 and bag.loose_messages() == []
-    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+    assert bag.problems == ["2 chunks read where the summary's chunk indexes put them (the "
                             'walk did not reach them whole)']
     assert [(offset, name, values) for offset, name, values, _ in bag.metadata] == \
-        [(metadata, 'machine', {'id': 'g-7', 'site': 'b'})]
+        [(metadata[0], 'zeta', {'id': 'g-10'}), (metadata[1], 'alpha', {'id': 'g-30'})]
     summary = make_reader(io.BytesIO(bytes(data))).get_summary()
     assert bag.summary_records[0x08] == len(summary.chunk_indexes) >= 4
-    assert bag.summary_records[0x0D] == 1 and bag.finished
+    assert bag.summary_records[0x0D] == 2 and bag.finished
+
+
+def test_a_damaged_summary_record_stops_the_walk_there(tmp_path):
+    """
+    A Channel of the summary whose topic runs past it: said; every message read (as the
+    mcap library's stream reader reads the data section).
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    at = next(o for o, op, _ in records if o > data_end and op == 0x04)
+    struct.pack_into('<I', data, at + 9 + 4, 1000)          # the topic's length
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(bytes(data[:data_end])) and len(got) == 40
+    assert bag.problems == [f'corrupt summary (opcode 0x04) at byte {at}: string beyond the '
+                            'record; stopped reading there']
+
+
+def test_two_messages_a_chunk_lists_in_reverse(tmp_path):
+    """
+    A chunk's message index listing its two messages in reverse (by log time, as some
+    writers sort it): both read, as the mcap library's stream reader reads them.
+    """
+    data = bytearray(hand_built_file([{1: [(20, 'later'), (10, 'earlier')]}]))
+    index = next(o for o, op, _ in top_level(bytes(data)) if op == 0x07)
+    entries = index + 9 + 6
+    data[entries:entries + 32] = data[entries + 16:entries + 32] + data[entries:entries + 16]
+    path = tmp_path / 'reversed.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(bytes(data))[::-1]
+    assert string_samples(bag, bag.channel('/n', STRING)) == [(10, 'earlier'), (20, 'later')]
+    assert bag.problems == []
 
 
 @pytest.mark.parametrize('damage, said', [
