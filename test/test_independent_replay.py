@@ -347,3 +347,65 @@ def test_stamps_ahead_of_the_log_times_by_more_than_max_stamp_jump(tmp_path):
     strict = replay(relogged, max_stamp_jump=0.25)
     assert strict.accepted == int(accepted.sum()) < 200
     assert strict.rejected == 200 - strict.accepted
+
+
+def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
+    """
+    observer.layout(first stamp, model, segment_start_ns) for each layout (one logged
+    before the samples, one after the first 50: its first stamp the 51st; one after the
+    last sample: its own log time), samples(...)
+    with every accepted sample's stamp, angle and speed as read; a segment's first and
+    last log time (none for a layout no sample used).
+    """
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.5)
+    unused, first = int(stamps[0]) - 2000, int(stamps[0]) - 1000
+    later = dict(GANTRY, name='later')
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(unused, yaml.safe_dump(dict(GANTRY, name='unused'))),
+                           (first, yaml.safe_dump(GANTRY)),
+                           (int(stamps[50]) - 1, yaml.safe_dump(later)),
+                           (int(stamps[-1]) + 1000, yaml.safe_dump(dict(GANTRY, name='after')))])
+
+    class Observer:
+        def __init__(self):
+            self.layouts, self.blocks = [], []
+
+        def layout(self, stamp, model, segment_start_ns):
+            self.layouts.append((stamp, model.layout.name, segment_start_ns))
+
+        def samples(self, stamp, angle, omega, alpha, result):
+            self.blocks.append((stamp, angle, omega))
+    observer = Observer()
+    summary = replay(bag, observer=observer)
+    assert observer.layouts == [(int(stamps[0]), 'unused', unused),
+                                (int(stamps[0]), GANTRY['name'], first),
+                                (int(stamps[50]), 'later', int(stamps[50]) - 1),
+                                (int(stamps[-1]) + 1000, 'after', int(stamps[-1]) + 1000)]
+    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(3)]
+    assert got[0].tolist() == stamps.tolist()
+    assert np.array_equal(got[1], angle) and np.array_equal(got[2], omega)
+    assert [(s.first_ns, s.last_ns, s.samples) for s in summary.segments] == \
+        [(None, None, 0), (int(stamps[0]), int(stamps[49]), 50),
+         (int(stamps[50]), int(stamps[-1]), 50), (None, None, 0)]
+
+
+def test_the_output_chunks_are_zstd_at_replays_level(replayed, tmp_path):
+    """Each chunk of the output: zstandard's compression of its records at level -7."""
+    import zstandard
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    stamps, _, _, _ = replayed
+    out = tmp_path / 'out.mcap'
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, *ramp(1.0, 2.0, rate=200.0,
+                                                              seconds=1.0)[1:],
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, out)
+    with open(out, 'rb') as stream:
+        chunks = [r for r in StreamReader(stream, emit_chunks=True).records
+                  if isinstance(r, Chunk)]
+    assert chunks and {c.compression for c in chunks} == {'zstd'}
+    for chunk in chunks:
+        records = zstandard.ZstdDecompressor().decompress(
+            chunk.data, max_output_size=chunk.uncompressed_size)
+        assert chunk.data == zstandard.ZstdCompressor(level=-7).compress(records)
+        assert chunk.data != zstandard.ZstdCompressor(level=1).compress(records)
