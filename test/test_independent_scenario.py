@@ -208,7 +208,9 @@ def test_the_written_bag_read_by_rosbags(tmp_path):
         tmp_path, events=events, seed=3, noise={'angle': 0.001, 'speed': 0.01}, rate=50,
         joint_name='spin', load_cells={'rate': 20, 'noise': 2.0, 'bias': {'rear': [1, 2, 3]}}))
     path = tmp_path / 'run.mcap'
-    assert write_bag(run, path, compression='lz4', machine_id='g-7') == 251
+    from cvc_balance.bag.run_label import run_label
+    assert write_bag(run, path, compression='lz4', machine_id='g-7',
+                     label=run_label('baseline')) == 251
     got = {}
     with open(path, 'rb') as stream:
         reader = make_reader(stream, validate_crcs=True)
@@ -216,7 +218,14 @@ def test_the_written_bag_read_by_rosbags(tmp_path):
             got.setdefault(channel.topic, []).append((message.log_time, TYPESTORE.deserialize_cdr(
                 message.data, reader.get_summary().schemas[channel.schema_id].name)))
         custom = [m.metadata for m in reader.iter_metadata() if m.name == 'cvc_balance']
-    assert custom == [{'machine_id': 'g-7'}]
+        qos = {c.topic: yaml.safe_load(c.metadata['offered_qos_profiles'])[0]
+               for c in reader.get_summary().channels.values()}
+    assert custom == [{'machine_id': 'g-7', 'run': 'baseline'}]
+    # (reliability, durability): 1 reliable, 2 best effort; 1 transient local, 2 volatile
+    assert {t: (q['reliability'], q['durability']) for t, q in qos.items()} == {
+        '/layout': (1, 1), '/joint_states': (2, 2), '/supports/front/measured_load': (2, 2),
+        '/supports/rear/measured_load': (2, 2)}
+    assert {m.header.frame_id for _, m in got['/joint_states']} == {''}
     assert sorted(got) == ['/joint_states', '/layout', '/supports/front/measured_load',
                            '/supports/rear/measured_load']
     assert [(t, yaml.safe_load(m.data)) for t, m in got['/layout']] == \
@@ -312,3 +321,31 @@ def test_files_that_are_no_scenario(tmp_path):
     (tmp_path / 'drum.yaml').write_text(yaml.safe_dump(LAYOUT))
     assert load_scenario(write_scenario(tmp_path, layout='drum.yaml')).layouts == \
         [(0.0, LAYOUT)]
+
+
+def test_the_bag_by_default_and_the_cells_noise(tmp_path):
+    """
+    By default zstd chunks of at most 64 KiB; the cells' noise: the normal draws of the
+    seed + 1 generator, per support its forces' (std: noise) then its torques' (a tenth).
+    """
+    run = load_scenario(write_scenario(
+        tmp_path, rate=500, seed=4, load_cells={'rate': 50, 'noise': 3.0,
+                                                'bias': {'front': [1.0, 2.0, 3.0]}}))
+    path = tmp_path / 'default.mcap'
+    write_bag(run, path)
+    with open(path, 'rb') as stream:
+        indexes = make_reader(stream, validate_crcs=True).get_summary().chunk_indexes
+    assert {i.compression for i in indexes} == {'zstd'} and len(indexes) >= 4
+    assert max(i.uncompressed_size for i in indexes) <= 1 << 16
+    assert run.stamps_ns().dtype == np.int64
+    noisy = run.cell_readings()
+    quiet = load_scenario(write_scenario(
+        tmp_path, rate=500, seed=4, load_cells={'rate': 50, 'noise': 0.0,
+                                                'bias': {'front': [1.0, 2.0, 3.0]}}))
+    rng = np.random.default_rng(5)
+    for name, (stamps, force, torque) in quiet.cell_readings().items():
+        assert stamps.dtype == np.int64 and np.array_equal(noisy[name][0], stamps)
+        force_noise = rng.normal(0.0, 3.0, force.shape)
+        torque_noise = rng.normal(0.0, 0.3, torque.shape)
+        assert np.abs(noisy[name][1] - (force + force_noise)).max() < 1e-9
+        assert np.abs(noisy[name][2] - (torque + torque_noise)).max() < 1e-9
