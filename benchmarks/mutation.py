@@ -174,7 +174,7 @@ def prepare(work, module, tests, deselected=(), fresh=False):
             target = work / name
             target.parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(ROOT / name, target)
-    present = [t for t in tests if (work / t).exists()]
+    present = [t for t in tests if (work / t.split('::')[0]).exists()]   # files or test ids
     deselect = DESELECT + ([] if module.endswith('compensated.py') else MILLION) + list(deselected)
     args = ['-p', 'no:cacheprovider', '-q'] + [f'--deselect={d}' for d in deselect]
     if fresh:
@@ -195,8 +195,13 @@ def prepare(work, module, tests, deselected=(), fresh=False):
     return present
 
 
-def run_module(name, work, children, tests=None, deselected=()):
-    """Run mutmut on one module; return its counts and the survivors' diffs."""
+def run_module(name, work, children, tests=None, deselected=(), mutants=()):
+    """
+    Run mutmut on one module; return its counts and the survivors' diffs.
+
+    ``mutants``: names (fnmatch patterns, e.g. ``*xǁBagǁ_walk__mutmut_*``) of the only
+    mutants tested; the others count as not checked.
+    """
     module, guarding = MODULES[name]
     fresh = name in FRESH
     present = prepare(work, module, tests or guarding, deselected, fresh)
@@ -206,8 +211,8 @@ def run_module(name, work, children, tests=None, deselected=()):
             [str(work / 'plugins')] + [p for p in [os.environ.get('PYTHONPATH')] if p])
     started = time.monotonic()
     log = open(work / 'mutmut.log', 'w')
-    subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children)],
-                   cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
+    subprocess.run([sys.executable, '-m', 'mutmut', 'run', '--max-children', str(children),
+                    *mutants], cwd=work, env=env, stdout=log, stderr=subprocess.STDOUT)
     seconds = time.monotonic() - started
     subprocess.run([sys.executable, '-m', 'mutmut', 'export-cicd-stats'], cwd=work, env=env,
                    stdout=log, stderr=subprocess.STDOUT)
@@ -220,7 +225,7 @@ def run_module(name, work, children, tests=None, deselected=()):
     survivors = []
     for line in results.splitlines():
         mutant, _, status = line.strip().rpartition(': ')
-        if mutant:
+        if mutant and status != 'not checked':
             diff = subprocess.run([sys.executable, '-m', 'mutmut', 'show', mutant], cwd=work,
                                   env=env, capture_output=True, text=True).stdout
             survivors.append((mutant, status, diff))
@@ -228,7 +233,7 @@ def run_module(name, work, children, tests=None, deselected=()):
         for mutant, status, diff in survivors:
             stream.write(f'## {mutant}: {status}\n{diff}\n')
     return {'module': module, 'tests': present, 'deselected': list(deselected),
-            'seconds': round(seconds, 1), **stats}
+            'mutants': list(mutants), 'seconds': round(seconds, 1), **stats}
 
 
 def main():
@@ -240,11 +245,15 @@ def main():
                         help='where the copies go (default %(default)s)')
     parser.add_argument('--children', type=int, default=2, help='mutants tested at once')
     parser.add_argument('--tests', nargs='+', metavar='FILE',
-                        help="test files to run instead of the module's own (MODULES): a "
-                             'narrower, faster selection, given in docs/mutation.md with its '
-                             'results')
+                        help="test files (or test ids, file::name) to run instead of the "
+                             "module's own (MODULES): a narrower, faster selection, given in "
+                             'docs/mutation.md with its results')
     parser.add_argument('--deselect', nargs='+', default=[], metavar='TEST',
                         help='tests (pytest node ids) left out besides DESELECT')
+    parser.add_argument('--mutants', nargs='+', default=[], metavar='PATTERN',
+                        help="only the mutants of these names (fnmatch patterns, as mutmut's "
+                             "names: '*xǁBagǁ_walk__mutmut_*' for a method, "
+                             "'*x_decode__mutmut_*' for a function)")
     args = parser.parse_args()
     unknown = [m for m in args.modules if m not in MODULES]
     if unknown:
@@ -253,7 +262,8 @@ def main():
     summary_path = args.work / 'summary.json'
     summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     for name in args.modules or list(MODULES):
-        row = run_module(name, args.work / name, args.children, args.tests, args.deselect)
+        row = run_module(name, args.work / name, args.children, args.tests, args.deselect,
+                         args.mutants)
         summary[name] = row
         args.work.mkdir(parents=True, exist_ok=True)
         summary_path.write_text(json.dumps(summary, indent=1))

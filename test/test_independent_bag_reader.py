@@ -516,3 +516,527 @@ def test_a_damaged_chunk_in_a_cut_recording(damage, number, cut_recording, tmp_p
     ours = bag.messages(bag.channel('/joint_states', JOINT))
     assert len(ours) > 100 and ours == expected
     assert bag.problems == [said, 'file has no end of data (truncated recording?)']
+
+
+# -- files that are cut, damaged or no bag at all (issue 29, third session) ----------------
+
+def notes_bag(path, chunk_size=400, compression=CompressionType.ZSTD):
+    """Write 40 String messages on /n (and 10 on /m) with the mcap library; return the path."""
+    messages = []
+    for k in range(40):
+        messages.append(('/n', 1_000 + k, TYPESTORE.serialize_cdr(
+            TYPESTORE.types[STRING](data=f'note {k} ' + 'x' * (k % 9)), STRING).tobytes()))
+        if k % 4 == 0:
+            messages.append(('/m', 1_000 + k, TYPESTORE.serialize_cdr(
+                TYPESTORE.types[STRING](data=f'm {k}'), STRING).tobytes()))
+    return write_with_mcap_library(path, {'/n': STRING, '/m': STRING}, messages,
+                                   chunk_size=chunk_size, compression=compression)
+
+
+def indexed_messages(data, topic='/n'):
+    """(log time, bytes) of ``topic`` as the mcap library's indexed reader reads them."""
+    reader = make_reader(io.BytesIO(data), validate_crcs=True)
+    return [(m.log_time, bytes(m.data))
+            for _, c, m in reader.iter_messages(log_time_order=False) if c.topic == topic]
+
+
+def ours(path, topic='/n'):
+    """(Bag, its messages of ``topic``)."""
+    bag = Bag(path)
+    return bag, bag.messages(bag.channel(topic, STRING))
+
+
+def read_before_the_cut(data, topic='/n'):
+    """(log time, bytes) of ``topic`` the mcap library's stream reader reads before the cut."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, Message
+    from mcap.stream_reader import StreamReader
+    out, topics = [], {}
+    try:
+        for r in StreamReader(io.BytesIO(data)).records:
+            if isinstance(r, Channel):
+                topics[r.id] = r.topic
+            elif isinstance(r, Message) and topics[r.channel_id] == topic:
+                out.append((r.log_time, bytes(r.data)))
+    except (EndOfFile, struct.error):            # where the file ends
+        pass
+    return out
+
+
+def test_what_is_no_bag_is_refused_in_one_line(tmp_path):
+    """No file, a directory, an empty file, a text: the words a person reads."""
+    from cvc_balance.bag.mcap_reader import BagError
+    (tmp_path / 'empty.mcap').write_bytes(b'')
+    (tmp_path / 'text.mcap').write_text('name: not a bag\n')
+    for name, why in (('missing.mcap', 'cannot read bag: No such file or directory'),
+                      ('.', 'cannot read bag: Is a directory'),
+                      ('empty.mcap', 'not an MCAP file (no MCAP magic at the start)'),
+                      ('text.mcap', 'not an MCAP file (no MCAP magic at the start)')):
+        with pytest.raises(BagError) as refused:
+            Bag(tmp_path / name)
+        assert str(refused.value) == f'{tmp_path / name}: {why}'
+
+
+def test_a_file_cut_anywhere_says_where_and_keeps_what_came_before(tmp_path):
+    """
+    Cut inside a record's header, inside a chunk, after the data, inside the summary.
+
+    Each time the one line says where (bytes by hand from the top-level records) and the
+    messages are those the mcap library's stream reader reads before the cut; a cut in the
+    summary loses no message.
+    """
+    data = notes_bag(tmp_path / 'whole.mcap').read_bytes()
+    records = top_level(data)
+    chunks = [o for o, op, _ in records if op == 0x06]
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    summary = next(o for o, op, _ in records if o > data_end)
+    assert len(chunks) >= 4
+    for cut, said in (
+            (chunks[2] + 5, f'file ends inside a record header at byte {chunks[2]} '
+                            '(truncated recording?)'),
+            (chunks[2] + 30, f'file ends inside a record (opcode 0x06) at byte {chunks[2]} of '
+                             f'{chunks[2] + 30} (truncated recording?)'),
+            (data_end, 'file has no end of data (truncated recording?)'),
+            (chunks[3] - 5, f'file ends inside a record (opcode 0x07) at byte '
+                            f'{max(o for o, _, _ in records if o < chunks[3] - 5)} of '
+                            f'{chunks[3] - 5} (truncated recording?)'),
+            (summary + 12, f'file ends inside a record (opcode 0x{data[summary]:02x}) at byte '
+                           f'{summary} of {summary + 12}, in its summary (every message was '
+                           'read)')):
+        path = tmp_path / 'cut.mcap'
+        path.write_bytes(data[:cut])
+        bag, got = ours(path)
+        assert got == read_before_the_cut(data[:cut]), cut
+        assert bag.problems == [said]
+        assert bag.finished is False
+    assert read_before_the_cut(data[:summary + 12]) == indexed_messages(data)
+    # A record of no body (a kind no reader knows) ending exactly at the cut: read.
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(data[:chunks[2]] + struct.pack('<BQ', 0x80, 0))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(data[:chunks[2]])
+    assert bag.problems == ['file has no end of data (truncated recording?)']
+    bag, got = ours(tmp_path / 'whole.mcap')
+    assert bag.finished is True and bag.problems == [] and got == indexed_messages(data)
+
+
+@pytest.mark.parametrize('data_end', ['whole', 'flipped'])
+def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(data_end, tmp_path):
+    """
+    Two chunks' opcodes flipped to a message's and a metadata record's to a kind no reader
+    knows (and the data end's: the summary then found by the footer, the walk having
+    missed it): the summary gives the chunks and the metadata record where they are.
+
+    Every message as the mcap library's indexed reader reads the damaged file (through the
+    summary: all of them), none taken for a message outside chunks; both metadata records
+    (the first found by its index, the second by the walk), in file order, read once; one
+    line for the chunks.
+    """
+    path = tmp_path / 'meta.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream, chunk_size=400, compression=CompressionType.LZ4)
+        writer.start(profile='ros2', library='mcap python')
+        schema = writer.register_schema(name=STRING, encoding='ros2msg', data=b'')
+        channel = writer.register_channel(topic='/n', message_encoding='cdr', schema_id=schema)
+        for k in range(40):
+            writer.add_message(channel, log_time=k, publish_time=k, sequence=k,
+                               data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](
+                                   data=f'note {k} ' + 'y' * k), STRING).tobytes())
+            if k in (10, 30):
+                writer.add_metadata('zeta' if k == 10 else 'alpha', {'id': f'g-{k}'})
+        writer.finish()
+    data = bytearray(path.read_bytes())
+    records = top_level(bytes(data))
+    chunks = [o for o, op, _ in records if op == 0x06]
+    metadata = [o for o, op, _ in records if op == 0x0C]
+    data_end_at = next(o for o, op, _ in records if op == 0x0F)
+    data[chunks[1]], data[chunks[3]], data[metadata[0]] = 0x05, 0x05, 0x7F
+    if data_end == 'flipped':
+        data[data_end_at] = 0x7E
+    damaged = tmp_path / 'damaged.mcap'
+    damaged.write_bytes(bytes(data))
+    bag, got = ours(damaged)
+    assert got == indexed_messages(bytes(data)) == indexed_messages(path.read_bytes())
+    assert len(got) == 40 and bag.loose_messages() == []
+    assert bag.problems == ["2 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+    assert [(offset, name, values) for offset, name, values, _ in bag.metadata] == \
+        [(metadata[0], 'zeta', {'id': 'g-10'}), (metadata[1], 'alpha', {'id': 'g-30'})]
+    summary = make_reader(io.BytesIO(bytes(data))).get_summary()
+    assert bag.summary_records[0x08] == len(summary.chunk_indexes) >= 4
+    assert bag.summary_records[0x0D] == 2 and bag.finished
+
+
+def test_a_damaged_summary_record_stops_the_walk_there(tmp_path):
+    """
+    A Channel of the summary whose topic runs past it: said; every message read (as the
+    mcap library's stream reader reads the data section).
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    at = next(o for o, op, _ in records if o > data_end and op == 0x04)
+    struct.pack_into('<I', data, at + 9 + 4, 1000)          # the topic's length
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(bytes(data[:data_end])) and len(got) == 40
+    assert bag.problems == [f'corrupt summary (opcode 0x04) at byte {at}: string beyond the '
+                            'record; stopped reading there']
+
+
+def test_two_messages_a_chunk_lists_in_reverse(tmp_path):
+    """
+    A chunk's message index listing its two messages in reverse (by log time, as some
+    writers sort it): both read, as the mcap library's stream reader reads them.
+    """
+    data = bytearray(hand_built_file([{1: [(20, 'later'), (10, 'earlier')]}]))
+    index = next(o for o, op, _ in top_level(bytes(data)) if op == 0x07)
+    entries = index + 9 + 6
+    data[entries:entries + 32] = data[entries + 16:entries + 32] + data[entries:entries + 16]
+    path = tmp_path / 'reversed.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(bytes(data))[::-1]
+    assert string_samples(bag, bag.channel('/n', STRING)) == [(10, 'earlier'), (20, 'later')]
+    assert bag.problems == []
+
+
+@pytest.mark.parametrize('damage, said', [
+    ('crc', 'CRC mismatch'), ('size', 'size differs from the chunk header'),
+    ('compression', "unknown compression 'zstx'"), ('no crc', None)])
+def test_a_chunk_that_does_not_decode_costs_only_itself(damage, said, tmp_path):
+    """
+    A chunk's CRC, uncompressed size or compression damaged: its messages are lost, said
+    once; the others are read (as the mcap library reads them from the file without that
+    chunk). A CRC of 0 means none was computed: the chunk is read.
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    at, length = [(o, n) for o, op, n in records if op == 0x06][1]
+    following = next(o for o, op, _ in records if o > at and op not in (0x06, 0x07))
+    following = min(following, [o for o, op, _ in records if op == 0x06][2])
+    if damage == 'crc':
+        data[at + 9 + 24] ^= 0x01
+    elif damage == 'size':
+        struct.pack_into('<Q', data, at + 9 + 16, struct.unpack_from('<Q', data, at + 25)[0] + 1)
+    elif damage == 'compression':
+        assert data[at + 9 + 32:at + 9 + 36] == b'zstd'
+        data[at + 9 + 35:at + 9 + 36] = b'x'
+    else:
+        struct.pack_into('<I', data, at + 9 + 24, 0)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    if said is None:
+        assert got == indexed_messages(bytes(data)) and bag.problems == []
+        return
+    whole = bytes(data)
+    assert got == stream_messages(whole[:at] + whole[following:], '/n')
+    assert len(got) < 40
+    assert bag.problems == [f'chunk at byte {at} unreadable ({said}); skipped']
+    bag.check_chunks()
+    assert len(bag.problems) == 1
+
+
+def test_a_message_index_that_points_elsewhere_walks_its_chunk(tmp_path):
+    """
+    An entry of a chunk's message index moved by one byte: said, the chunk walked, every
+    message read (as the mcap library's stream reader, which needs no index, reads them).
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap').read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07 and
+                 struct.unpack_from('<H', data, o + 9)[0] == 1)
+    offset, = struct.unpack_from('<Q', data, index + 9 + 6 + 8 + 16)   # its second entry
+    struct.pack_into('<Q', data, index + 9 + 6 + 8 + 16, offset + 1)
+    path = tmp_path / 'moved.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == stream_messages(bytes(data), '/n') and len(got) == 40
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /n does not point at its '
+                            'messages; chunk walked instead']
+
+
+def joint_rows_by_rosbags(path, joint='gantry_joint', skip=None):
+    """
+    ((stamp, log time, angle, speed) of each JointState rosbags decodes, by log time;
+    how many it cannot decode), from the mcap library's reading of /joint_states; those
+    naming ``skip`` left out.
+    """
+    from rosbags.serde import SerdeError
+    rows, failed = [], 0
+    with open(path, 'rb') as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+            if channel.topic != '/joint_states':
+                continue
+            try:
+                m = TYPESTORE.deserialize_cdr(message.data, JOINT)
+            except SerdeError:
+                failed += 1
+                continue
+            if skip in m.name:
+                continue
+            i = list(m.name).index(joint)
+            rows.append((m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, message.log_time,
+                         m.position[i], m.velocity[i]))
+    return sorted(rows, key=lambda row: row[1]), failed
+
+
+@pytest.mark.parametrize('strided', [True, False], ids=['strided', 'gathered'])
+def test_joint_states_of_one_length_and_other_layouts_are_told_apart(strided, tmp_path):
+    """
+    JointStates of one length (104 bytes) whose joint is elsewhere, and unreadable ones.
+
+    Kinds in a seeded random order: the joint first or second of two names, and two
+    positions and speeds; one position and three speeds; three positions and one speed;
+    a message whose name count says 1000 (unreadable: rejected); one whose second name
+    differs from the joint's in its last letter (skipped). One chunk, the
+    records one after the other (``strided``: read through strided views) or between
+    String messages of other lengths (gathered; log times a permutation starting with the
+    smallest: the message index lists them in that order). Every row equals rosbags'
+    decoding (the joint picked by name), in log-time order; the unreadable ones counted;
+    nothing else said.
+    """
+    rng = np.random.default_rng(5)
+    kinds = np.concatenate([[1], rng.integers(0, 6, 63)])   # the first group's: every kind
+    log_times = 1_000 + (np.arange(64) if strided else           # the index's order
+                         np.concatenate([[0], 1 + rng.permutation(63)]))
+    messages, expected, bad, skipped = [], [], 0, 0
+    for n, (kind, log) in enumerate(zip(kinds.tolist(), log_times.tolist())):
+        q, w = 0.01 * n - 0.3, 2.0 + 0.5 * n
+        names, position, velocity = [(['gantry_joint', 'tb'], [q, 9.0], [w, 8.0]),
+                                     (['tb', 'gantry_joint'], [9.0, q], [8.0, w]),
+                                     (['gantry_joint', 'tb'], [q], [w, 8.0, 7.0]),
+                                     (['gantry_joint', 'tb'], [q, 9.0, 8.0], [w]),
+                                     (['gantry_joint', 'tb'], [q, 9.0], [w, 8.0]),
+                                     (['tb', 'gantry_joinx'], [9.0, q], [8.0, w])][kind]
+        data = bytearray(joint_state(100 + n, 7 * n, 'f', names, position, velocity))
+        assert len(data) == 104
+        if kind == 4:
+            struct.pack_into('<I', data, 20, 1000)        # the name count
+            bad += 1
+        elif kind == 5:
+            skipped += 1
+        else:
+            expected.append(((100 + n) * 10**9 + 7 * n, log, q, w))
+        messages.append(('/joint_states', log, bytes(data)))
+        if not strided:
+            messages.append(('/note', log, TYPESTORE.serialize_cdr(
+                TYPESTORE.types[STRING](data='x' * (n % 7)), STRING).tobytes()))
+    path = write_with_mcap_library(tmp_path / 'joints.mcap',
+                                   {'/joint_states': JOINT, '/note': STRING}, messages,
+                                   chunk_size=1 << 20)
+    expected.sort(key=lambda row: row[1])
+    assert joint_rows_by_rosbags(path, skip='gantry_joinx') == (expected, bad) and bad >= 5
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == expected
+    assert (motion.rejected, motion.skipped) == (bad, skipped) and skipped >= 5
+    assert motion.joints_seen == ['gantry_joinx', 'tb']
+    assert motion.reasons == [f'{bad} /joint_states messages not readable as JointState with '
+                              'position and velocity']
+    good = write_with_mcap_library(tmp_path / 'good.mcap', {'/joint_states': JOINT},
+                                   [m for m, k in zip(messages[::1 if strided else 2], kinds)
+                                    if k < 4])
+    motion = joint_samples(Bag(good), Bag(good).channel('/joint_states', JOINT), 'gantry_joint')
+    assert len(motion.stamp) == len(expected) and motion.reasons == [] and \
+        motion.rejected == 0
+
+
+def test_more_publishers_in_a_chunk_than_are_gathered_at_once(tmp_path):
+    """
+    Twenty publishers (frames of 0 to 19 letters) on one topic in one chunk: the first 16
+    layouts gathered at once, the others message by message; every row as rosbags decodes
+    it, the one unreadable message counted.
+    """
+    from cvc_balance.bag.mcap_reader import LAYOUTS
+    assert LAYOUTS == 16
+    rng = np.random.default_rng(8)
+    messages, expected = [], []
+    for n, publisher in enumerate(rng.integers(0, 20, 200).tolist()):
+        q, w = 0.001 * n, 1.0 + n
+        data = joint_state(50 + n, n, 'f' * publisher, ['gantry_joint'], [q], [w])
+        if n == 150:
+            data = data[:40]                   # a message cut short: unreadable
+        else:
+            expected.append(((50 + n) * 10**9 + n, 5_000 + n, q, w))
+        messages.append(('/joint_states', 5_000 + n, data))
+    path = write_with_mcap_library(tmp_path / 'many.mcap', {'/joint_states': JOINT},
+                                   messages, chunk_size=1 << 20)
+    assert joint_rows_by_rosbags(path) == (expected, 1)
+    bag = Bag(path)
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == expected
+    assert (motion.rejected, motion.skipped) == (1, 0)
+
+
+def built(*records):
+    """The bytes of ``records`` (the mcap library's record classes), one after the other."""
+    from mcap.data_stream import RecordBuilder
+    out = b''
+    for record in records:
+        builder = RecordBuilder()
+        record.write(builder)
+        out += builder.end()
+    return out
+
+
+def string_record(channel, log_time, text):
+    """A Message record (the mcap library's) of a std_msgs/String serialised by rosbags."""
+    from mcap.records import Message
+    return Message(channel_id=channel, sequence=0, log_time=log_time, publish_time=log_time,
+                   data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data=text),
+                                                STRING).tobytes())
+
+
+def hand_built_file(chunks, loose_before=(), loose_after=(), compress=None, crc=True,
+                    indexes=True, summary=False):
+    """
+    A recording built record by record (the mcap library's records): Header, Schema,
+    Channels 1 (/n) and 2 (/m), loose messages, chunks of messages ({id: [(time, text)]}
+    each; compressed by ``compress`` (name, function) if given, their CRC or 0, with
+    message indexes or not), loose messages, DataEnd, a summary of the Schema and the
+    Channels (``summary``) or none, the Footer.
+    """
+    import zlib
+    from mcap.records import Channel, Chunk, DataEnd, Footer, Header, MessageIndex, Schema
+    out = MAGIC + built(Header(profile='ros2', library='by hand'),
+                        Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                        Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                                metadata={}),
+                        Channel(id=2, schema_id=1, topic='/m', message_encoding='cdr',
+                                metadata={}))
+    out += built(*(string_record(1, t, text) for t, text in loose_before))
+    for chunk in chunks:
+        records, index = b'', {}
+        for channel, messages in chunk.items():
+            for t, text in messages:
+                index.setdefault(channel, []).append((t, len(records)))
+                records += built(string_record(channel, t, text))
+        name, pack = compress or ('', lambda data: data)
+        times = [t for messages in chunk.values() for t, _ in messages]
+        out += built(Chunk(message_start_time=min(times), message_end_time=max(times),
+                           uncompressed_size=len(records),
+                           uncompressed_crc=zlib.crc32(records) if crc else 0,
+                           compression=name, data=pack(records)))
+        if indexes:
+            out += built(*(MessageIndex(channel_id=c, records=entries)
+                           for c, entries in index.items()))
+    out += built(*(string_record(1, t, text) for t, text in loose_after))
+    out += built(DataEnd(data_section_crc=0))
+    start = len(out) if summary else 0
+    if summary:
+        out += built(Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                     *(Channel(id=i, schema_id=1, topic=topic, message_encoding='cdr',
+                               metadata={}) for i, topic in ((1, '/n'), (2, '/m'))))
+    return out + built(Footer(summary_start=start, summary_offset_start=0,
+                              summary_crc=0)) + MAGIC
+
+
+MAGIC = b'\x89MCAP0\r\n'
+
+
+def test_messages_outside_chunks_come_in_file_order(tmp_path):
+    """
+    Loose messages before, between (none) and after chunks, and chunks without a message
+    of one channel: every channel's messages in file order, as the mcap library's stream
+    reader reads them, with and without message indexes (and then with the channels in
+    a summary: the chunks are walked only when read).
+    """
+    for indexes, summary in ((True, False), (False, False), (False, True)):
+        data = hand_built_file([{1: [(20, 'c1'), (21, 'c2')], 2: [(22, 'm1')]},
+                                {2: [(30, 'm2')]}, {1: [(40, 'd1')]}],
+                               loose_before=[(10, 'a'), (11, 'b')],
+                               loose_after=[(50, 'e')], indexes=indexes, summary=summary)
+        path = tmp_path / 'loose.mcap'
+        path.write_bytes(data)
+        bag = Bag(path)
+        assert bag.problems == []
+        for topic, texts in (('/n', ['a', 'b', 'c1', 'c2', 'd1', 'e']), ('/m', ['m1', 'm2'])):
+            theirs = read_before_the_cut(data, topic)
+            assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in theirs] == texts
+            assert bag.messages(bag.channel(topic, STRING)) == theirs, (topic, indexes)
+
+
+def test_a_zstd_chunk_without_its_content_size_and_a_chunk_without_a_crc(tmp_path):
+    """
+    A zstd frame that does not state its size (the chunk record does) and a chunk whose
+    CRC is 0 (none computed): both read, as the mcap library reads them.
+    """
+    import zstandard
+    pack = zstandard.ZstdCompressor(write_content_size=False).compress
+    data = hand_built_file([{1: [(1, 'one'), (2, 'two')]}, {1: [(3, 'three')]}],
+                           compress=('zstd', pack), crc=False)
+    path = tmp_path / 'sizeless.mcap'
+    path.write_bytes(data)
+    bag = Bag(path)
+    assert bag.problems == [] and [c.crc for c in bag.chunks] == [0, 0]
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(data)
+    assert len(read_before_the_cut(data)) == 3
+
+
+def test_a_chunk_without_a_crc_found_by_its_chunk_index(tmp_path):
+    """
+    test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes with a CRC of 0
+    in the chunk the walk cannot take: its records are checked whole instead, and read.
+    """
+    path = notes_bag(tmp_path / 'whole.mcap', compression=CompressionType.NONE)
+    data = bytearray(path.read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][2]
+    struct.pack_into('<I', data, chunk + 9 + 24, 0)
+    data[chunk] = 0x05
+    damaged = tmp_path / 'damaged.mcap'
+    damaged.write_bytes(bytes(data))
+    bag, got = ours(damaged)
+    assert got == indexed_messages(path.read_bytes()) and len(got) == 40
+    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+
+
+def test_a_message_index_naming_a_channel_not_in_its_chunk(tmp_path):
+    """
+    The second chunk's message index of /n relabelled /m (whose messages the chunk lacks):
+    /m read first walks that chunk (said); then both channels are whole, as the mcap
+    library's stream reader reads them.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a')], 2: [(2, 'm')]}, {1: [(3, 'b')]},
+                                      {2: [(4, 'n')], 1: [(5, 'c')]}]))
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07)
+    struct.pack_into('<H', data, index + 9, 2)
+    path = tmp_path / 'relabelled.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    assert bag.messages(bag.channel('/m', STRING)) == read_before_the_cut(bytes(data), '/m')
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(bytes(data), '/n')
+    assert len(read_before_the_cut(bytes(data), '/n')) == 3
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /m does not point at its '
+                            'messages; chunk walked instead']
+
+
+def test_a_damaged_chunk_the_walk_cannot_take_is_said(tmp_path):
+    """
+    A chunk's opcode flipped to a message's and a byte of its data flipped: the walk does
+    not take it and its chunk index finds no whole chunk there. Said (it was lost without
+    a word); every other message read, as the mcap library's stream reader reads the file
+    without that chunk.
+    """
+    whole = notes_bag(tmp_path / 'whole.mcap').read_bytes()
+    at, length = [(o, n) for o, op, n in top_level(whole) if op == 0x06][1]
+    data = bytearray(whole)
+    data[at] = 0x05
+    data[at + 9 + length // 2] ^= 0xFF
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    expected = read_before_the_cut(whole[:at] + whole[at + 9 + length:])
+    assert got == expected and 0 < len(expected) < 40
+    assert bag.problems == [f"chunk at byte {at} (from the summary's chunk index) unreadable "
+                            '(not a whole chunk whose CRC holds); skipped']

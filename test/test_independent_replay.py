@@ -151,3 +151,261 @@ def test_rejected_layout_messages_are_said_one_by_one_up_to_five(tmp_path, monke
                            'error: RuntimeError: the parser failed')
     assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
                for k, p in zip(range(2, 6), problems))
+
+
+def test_a_keyphasor_named_on_its_own_topic_is_the_motion(tmp_path):
+    """
+    read_inputs with the keyphasor named (``--keyphasor /tach``): that topic's marks.
+
+    Twelve TimeReference marks 0.25 s apart on /tach (4 revolutions a second), and a decoy
+    /keyphasor (the default name) whose marks are 0.5 s apart: every sample's speed is
+    8 pi rad/s and its angle 2 pi times the revolutions since the last mark, by hand
+    (held to 1e-9).
+    """
+    from cvc_balance.bag.inputs import InputTopics
+    from cvc_balance.bag.replay import read_inputs
+    path = tach_bag(tmp_path / 'tach.mcap')
+    start = 3 * 10**9
+    motion, layouts = read_inputs(Bag(path), 'gantry_joint', InputTopics(keyphasor='/tach'))
+    assert layouts == [] and len(motion.stamp) >= 11 * 8
+    turns = (motion.stamp - start) / 250_000_000
+    assert turns.min() >= 0.0 and turns.max() <= 11.0
+    np.testing.assert_allclose(motion.omega, 8 * math.pi, rtol=1e-9)
+    wrapped = np.angle(np.exp(2j * math.pi * turns))
+    assert np.abs(np.angle(np.exp(1j * (motion.angle - wrapped)))).max() <= 1e-9
+
+
+def test_a_joint_state_topic_without_messages_gives_no_samples(tmp_path):
+    """No JointState at all: no sample and no complaint about the joint's name."""
+    from cvc_balance.bag.replay import read_inputs
+    path = write_input_bag(tmp_path / 'none.mcap', [], [], [], [(1, yaml.safe_dump(GANTRY))])
+    motion, layouts = read_inputs(Bag(path), 'gantry_joint')
+    assert len(motion.stamp) == 0 and motion.skipped == 0 and motion.joint_topic == \
+        '/joint_states'
+    assert [log for log, _ in layouts] == [1]
+
+
+def test_every_output_wrench_is_pinocchios(replayed):
+    """
+    Each output topic's six numbers at every sample, by Pinocchio's RNEA at the input's
+    angle and speed and the ramp's acceleration (2 rad/s^2; the estimate's slope is
+    exact on a ramp from the second sample on): the bearing load and each support's (force
+    and moment, stator frame), the unbalance (rotor frame: U omega^2 and the couple) and
+    the drive torque. Held to 1e-9 of each topic's largest value (measured 1e-13).
+    """
+    from independent import PinocchioRotor
+    stamps, omega, out, _ = replayed
+    rotor = PinocchioRotor(GANTRY)
+    angle = np.remainder(1.0 * (stamps - stamps[0]) * 1e-9 + (stamps - stamps[0])**2 * 1e-18
+                         + math.pi, 2 * math.pi) - math.pi
+    expected = {topic: [] for topic in out if topic != '/layout'}
+    for q, w in zip(angle[1:], omega[1:]):
+        ref = rotor.loads(float(q), float(w), 2.0)
+        expected['/bearing_load'].append(np.concatenate([ref['force'], ref['moment']]))
+        for name, (force, moment) in ref['supports'].items():
+            expected[f'/supports/{name}/load'].append(np.concatenate([force, moment]))
+        expected['/unbalance'].append(np.concatenate(rotor.unbalance(float(w))))
+        expected['/drive_torque'].append([0, 0, 0, 0, 0, ref['drive_torque']])
+    for topic, rows in expected.items():
+        got = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                         m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
+                        for m in (TYPESTORE.deserialize_cdr(data, WRENCH)
+                                  for _, _, data in out[topic][1:])])
+        rows = np.array(rows, float)
+        assert np.abs(got - rows).max() <= 1e-9 * np.abs(rows).max(), topic
+
+
+def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_path):
+    """
+    A ramp (3 rad/s^2 for 1 s), then a steady 4 rad/s for 2 s: 20 default time constants
+    (0.1 s) after the corner the drive torque is Pinocchio's at alpha 0, to 1e-6 of the
+    ramp's own torque I_zz 3 rad/s^2 (measured 1e-7; a time constant of 1.1 s leaves a
+    tenth of the ramp's acceleration there).
+    """
+    from independent import PinocchioRotor
+    rate = 200.0
+    t = np.arange(int(3.0 * rate)) / rate
+    omega = np.where(t < 1.0, 1.0 + 3.0 * t, 4.0)
+    theta = np.where(t < 1.0, t + 1.5 * t * t, 2.5 + 4.0 * (t - 1.0))
+    angle = np.remainder(theta + math.pi, 2 * math.pi) - math.pi
+    stamps = 5 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    bag = write_input_bag(tmp_path / 'corner.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, tmp_path / 'out.mcap')
+    with open(tmp_path / 'out.mcap', 'rb') as stream:
+        torques = [TYPESTORE.deserialize_cdr(m.data, WRENCH).wrench.torque.z
+                   for _, c, m in make_reader(stream).iter_messages(log_time_order=False)
+                   if c.topic == '/drive_torque']
+    rotor = PinocchioRotor(GANTRY)
+    expected = [rotor.loads(float(q), float(w), 0.0)['drive_torque']
+                for q, w in zip(angle, omega)]
+    ramp_torque = abs(rotor.loads(0.0, 4.0, 3.0)['drive_torque'] -
+                      rotor.loads(0.0, 4.0, 0.0)['drive_torque'])
+    assert len(torques) == len(t) and ramp_torque > 100.0
+    assert max(abs(a - b) for a, b in zip(torques[-10:], expected[-10:])) <= 1e-6 * ramp_torque
+
+
+def joint_bag(path, stamps, messages):
+    """A bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
+    from cvc_balance.bag.mcap_writer import BagWriter
+    joint = 'sensor_msgs/msg/JointState'
+    types = TYPESTORE.types
+    with BagWriter(path) as writer:
+        layout = writer.add_channel('/layout', 'std_msgs/msg/String', latched=True)
+        writer.write(layout, int(stamps[0]) - 1000, TYPESTORE.serialize_cdr(
+            types['std_msgs/msg/String'](data=yaml.safe_dump(GANTRY)),
+            'std_msgs/msg/String').tobytes())
+        channel = writer.add_channel('/joint_states', joint)
+        for ns, (names, position, velocity) in zip(stamps, messages):
+            msg = types[joint](header=types['std_msgs/msg/Header'](
+                stamp=types['builtin_interfaces/msg/Time'](sec=int(ns) // 10**9,
+                                                           nanosec=int(ns) % 10**9),
+                frame_id=''), name=list(names), position=np.array(position, float),
+                velocity=np.array(velocity, float), effort=np.zeros(0))
+            writer.write(channel, int(ns), TYPESTORE.serialize_cdr(msg, joint).tobytes())
+    return path
+
+
+def test_joint_states_without_the_joint_are_counted_and_named(tmp_path):
+    """
+    Of 12 JointStates: 8 of the joint, 3 naming two other joints, 1 of the joint without a
+    velocity: 12 samples, 8 accepted, 3 skipped (said with the joints they name, in
+    order), 1 rejected. Only other joints: refused, naming them.
+    """
+    stamps = 5 * 10**9 + 5_000_000 * np.arange(12)
+    messages = [(['gantry_joint'], [0.01 * k], [2.0]) for k in range(12)]
+    for k in (3, 6, 9):
+        messages[k] = (['wheel', 'arm'], [0.0, 1.0], [0.0, 0.0])
+    messages[10] = (['gantry_joint'], [0.1], [])
+    bag = joint_bag(tmp_path / 'mixed.mcap', stamps, messages)
+    summary = replay(bag)
+    assert (summary.samples, summary.accepted, summary.skipped, summary.rejected) == \
+        (12, 8, 3, 1)
+    assert summary.skipped_reason == ("3 JointState messages without joint 'gantry_joint' "
+                                      '(they name: arm, wheel)')
+    others = joint_bag(tmp_path / 'others.mcap', stamps[:2], messages[3:4] * 2)
+    with pytest.raises(BagError) as refused:
+        replay(others)
+    assert str(refused.value) == (f"{others}: no /joint_states message carries joint "
+                                  "'gantry_joint' (they name: arm, wheel); choose the joint "
+                                  'with --joint-name')
+
+
+def tach_bag(path, missed=()):
+    """TimeReference marks on /tach every 0.25 s and on /keyphasor every 0.5 s (12 each)."""
+    from cvc_balance.bag.mcap_writer import BagWriter
+    from tach_bags import time_reference
+    start = 3 * 10**9
+    with BagWriter(path) as writer:
+        for topic, period in (('/tach', 250_000_000), ('/keyphasor', 500_000_000)):
+            channel = writer.add_channel(topic, 'sensor_msgs/msg/TimeReference')
+            for k in range(12):
+                if topic == '/tach' and k in missed:
+                    continue
+                ns = start + k * period
+                writer.write(channel, ns + 1_000_000, time_reference(ns, ns + 1_000_000))
+    return path
+
+
+def test_replay_reads_the_topics_it_is_given(tmp_path):
+    """
+    replay(names=...): the keyphasor on /tach (4 rev/s), not the default /keyphasor (2);
+    a mark missed on /tach is put back and said among the replay's problems.
+    """
+    from cvc_balance.bag.inputs import InputTopics
+    path = tach_bag(tmp_path / 'tach.mcap', missed=(6,))
+    summary = replay(path, layout_file=GANTRY_FILE, names=InputTopics(keyphasor='/tach'))
+    (segment,) = summary.segments
+    assert segment.max_speed == pytest.approx(8 * math.pi, rel=1e-9)
+    said = [p for p in summary.problems if p.startswith('keyphasor /tach: ')]
+    assert len(said) == 1 and ' 1 missed (put back), 0 doubled (dropped)' in said[0]
+
+
+def test_stamps_ahead_of_the_log_times_by_more_than_max_stamp_jump(tmp_path):
+    """
+    From the 100th sample on the stamps run 0.5 s ahead of the log times: within the
+    default max_stamp_jump (1 s) every sample is taken; with 0.25 s the replay takes
+    what the stamp gate takes of those stamps and log times (in s), fewer.
+    """
+    from cvc_balance.physics.motion import gate_samples
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=1.0)
+    log_times = stamps.copy()
+    stamps[100:] += 500_000_000
+    bag = write_input_bag(tmp_path / 'ahead.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    from cvc_balance.bag.mcap_writer import BagWriter
+    relogged = tmp_path / 'relogged.mcap'
+    source = Bag(bag)
+    with BagWriter(relogged) as writer:       # the same messages at the earlier log times
+        for channel in source.channels.values():
+            out = writer.add_channel(channel.topic, channel.msg_type)
+            for k, (log_time, data) in enumerate(source.messages(channel)):
+                writer.write(out, int(log_times[k]) if channel.topic == '/joint_states'
+                             else log_time, data)
+    assert replay(relogged).accepted == 200
+    accepted, _ = gate_samples(stamps * 1e-9, angle, omega, 1000.0, 0.25, log_times * 1e-9)
+    strict = replay(relogged, max_stamp_jump=0.25)
+    assert strict.accepted == int(accepted.sum()) < 200
+    assert strict.rejected == 200 - strict.accepted
+
+
+def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
+    """
+    observer.layout(first stamp, model, segment_start_ns) for each layout (one logged
+    before the samples, one after the first 50: its first stamp the 51st; one after the
+    last sample: its own log time), samples(...)
+    with every accepted sample's stamp, angle and speed as read; a segment's first and
+    last log time (none for a layout no sample used).
+    """
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.5)
+    unused, first = int(stamps[0]) - 2000, int(stamps[0]) - 1000
+    later = dict(GANTRY, name='later')
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(unused, yaml.safe_dump(dict(GANTRY, name='unused'))),
+                           (first, yaml.safe_dump(GANTRY)),
+                           (int(stamps[50]) - 1, yaml.safe_dump(later)),
+                           (int(stamps[-1]) + 1000, yaml.safe_dump(dict(GANTRY, name='after')))])
+
+    class Observer:
+        def __init__(self):
+            self.layouts, self.blocks = [], []
+
+        def layout(self, stamp, model, segment_start_ns):
+            self.layouts.append((stamp, model.layout.name, segment_start_ns))
+
+        def samples(self, stamp, angle, omega, alpha, result):
+            self.blocks.append((stamp, angle, omega))
+    observer = Observer()
+    summary = replay(bag, observer=observer)
+    assert observer.layouts == [(int(stamps[0]), 'unused', unused),
+                                (int(stamps[0]), GANTRY['name'], first),
+                                (int(stamps[50]), 'later', int(stamps[50]) - 1),
+                                (int(stamps[-1]) + 1000, 'after', int(stamps[-1]) + 1000)]
+    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(3)]
+    assert got[0].tolist() == stamps.tolist()
+    assert np.array_equal(got[1], angle) and np.array_equal(got[2], omega)
+    assert [(s.first_ns, s.last_ns, s.samples) for s in summary.segments] == \
+        [(None, None, 0), (int(stamps[0]), int(stamps[49]), 50),
+         (int(stamps[50]), int(stamps[-1]), 50), (None, None, 0)]
+
+
+def test_the_output_chunks_are_zstd_at_replays_level(replayed, tmp_path):
+    """Each chunk of the output: zstandard's compression of its records at level -7."""
+    import zstandard
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    stamps, _, _, _ = replayed
+    out = tmp_path / 'out.mcap'
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, *ramp(1.0, 2.0, rate=200.0,
+                                                              seconds=1.0)[1:],
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, out)
+    with open(out, 'rb') as stream:
+        chunks = [r for r in StreamReader(stream, emit_chunks=True).records
+                  if isinstance(r, Chunk)]
+    assert chunks and {c.compression for c in chunks} == {'zstd'}
+    for chunk in chunks:
+        records = zstandard.ZstdDecompressor().decompress(
+            chunk.data, max_output_size=chunk.uncompressed_size)
+        assert chunk.data == zstandard.ZstdCompressor(level=-7).compress(records)
+        assert chunk.data != zstandard.ZstdCompressor(level=1).compress(records)

@@ -362,7 +362,8 @@ class Bag:
         Read the chunks and metadata records the summary lists that the walk did not find.
 
         Found where the summary's indexes say, as the ``mcap`` library's indexed reader
-        finds them (their record headers are not needed); a chunk only if its CRC holds.
+        finds them (their record headers are not needed); a chunk only if its CRC holds
+        (else said, as a chunk that does not decode is).
         """
         data, size = self._bytes, len(self._bytes)
         known = {chunk.offset for chunk in self.chunks}
@@ -375,6 +376,9 @@ class Bag:
                 self.chunks.append(chunk)
                 known.add(offset)
                 found += 1
+            else:
+                self.problems.append(f"chunk at byte {offset} (from the summary's chunk index) "
+                                     'unreadable (not a whole chunk whose CRC holds); skipped')
         if found:
             self.chunks.sort(key=lambda c: c.offset)
             self.problems.append(f'{found} chunks read where the summary\'s chunk indexes '

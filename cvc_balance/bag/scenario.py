@@ -157,7 +157,8 @@ def load_scenario(path):
              'start', 'hidden', 'load_cells'}
     for key in spec:
         if key not in known:
-            raise ScenarioError(f'{path}: unknown field {key!r} (known: {", ".join(known)})')
+            raise ScenarioError(f'{path}: unknown field {key!r} '
+                                f'(known: {", ".join(sorted(known))})')
     layout = spec.get('layout')
     if isinstance(layout, str):
         try:
