@@ -1,0 +1,386 @@
+"""
+The fleet's files by hand: digests, the bags found, what a task reads, the tables, batches.
+
+References: SHA-256 by :mod:`hashlib` over the bytes the digest's description names
+(written here, not by the package), ``os.stat``, file trees and batch sizes worked out by
+hand, the tables read back by pyarrow, a second ``flock`` on the lock file. Every bag here
+is a few bytes (a failure in microseconds) or the bundled ``tilted_shift.mcap`` (0.3 s).
+"""
+
+import fcntl
+import hashlib
+import os
+from pathlib import Path
+import shutil
+import socket
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from cvc_balance.fleet import digest as fleet_digest
+from cvc_balance.fleet import engine, store, tasks
+from cvc_balance.fleet.discover import find_bags, is_bag_directory
+from cvc_balance.fleet.rows import FAILURE_SCHEMA, RESULT_SCHEMA, table
+
+ROOT = Path(__file__).resolve().parents[1]
+TILTED = ROOT / 'bags' / 'tilted_shift.mcap'
+
+
+# -- digest ------------------------------------------------------------------------------------
+
+def test_a_files_digest_is_the_sha256_of_its_bytes_read_in_pieces(tmp_path):
+    """Two and a half pieces of 1 MiB, one byte, nothing: hashlib over the whole bytes."""
+    data = np.random.default_rng(29).integers(0, 256, (5 << 19) + 3, np.uint8).tobytes()
+    for size in (len(data), 1 << 20, 1, 0):
+        path = tmp_path / f'{size}.mcap'
+        path.write_bytes(data[:size])
+        assert fleet_digest.content_digest(path) == hashlib.sha256(data[:size]).hexdigest()
+        assert fleet_digest.content_digest(str(path)) == hashlib.sha256(data[:size]).hexdigest()
+
+
+def test_a_directorys_digest_names_sizes_and_bytes_of_its_files_in_name_order(tmp_path):
+    """
+    Each regular, not hidden file as (8-byte length, name, 8-byte size, bytes), by name.
+
+    A name that is not UTF-8 (the byte 0xff) goes in as its bytes; a hidden file and a
+    folder inside count for nothing; renaming the directory changes nothing, renaming a
+    file does.
+    """
+    bag = tmp_path / 'run'
+    bag.mkdir()
+    content = {b'metadata.yaml': b'rosbag2_bagfile_information: {}\n',
+               b'run_0.mcap': bytes(range(256)) * 4100, b'\xffodd.db3': b'\x00\x01'}
+    for name, data in content.items():
+        with open(os.path.join(os.fsencode(bag), name), 'wb') as stream:
+            stream.write(data)
+    (bag / '.hidden').write_bytes(b'never read')
+    (bag / 'inner').mkdir()
+    (bag / 'inner' / 'x.mcap').write_bytes(b'never read')
+    by_hand = hashlib.sha256()
+    for name in sorted(content, key=os.fsdecode):
+        by_hand.update(len(name).to_bytes(8, 'little') + name)
+        by_hand.update(len(content[name]).to_bytes(8, 'little') + content[name])
+    assert fleet_digest.content_digest(bag) == by_hand.hexdigest()
+    moved = bag.rename(tmp_path / 'elsewhere')
+    assert fleet_digest.content_digest(moved) == by_hand.hexdigest()
+    (moved / 'run_0.mcap').rename(moved / 'run_1.mcap')
+    assert fleet_digest.content_digest(moved) != by_hand.hexdigest()
+
+
+def test_a_bags_stat_key_is_its_size_and_newest_time(tmp_path):
+    """A file: (size, mtime ns); a directory: its files' sizes summed, their newest time."""
+    one = tmp_path / 'one.mcap'
+    one.write_bytes(b'12345')
+    os.utime(one, ns=(7, 1_700_000_000_123_456_789))
+    assert fleet_digest.stat_key(one) == (5, 1_700_000_000_123_456_789)
+    assert fleet_digest.stat_key(str(one)) == (5, 1_700_000_000_123_456_789)
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    assert fleet_digest.stat_key(bag) == (0, 0)
+    for name, size, mtime in (('a', 3, 2_000), ('b', 11, 9_000), ('c', 4, 5_000),
+                              ('.hidden', 100, 99_000)):
+        (bag / name).write_bytes(b'x' * size)
+        os.utime(bag / name, ns=(1, mtime))
+    (bag / 'folder').mkdir()
+    os.utime(bag / 'folder', ns=(1, 50_000))
+    assert fleet_digest.stat_key(bag) == (3 + 11 + 4, 9_000)
+
+
+# -- discover ----------------------------------------------------------------------------------
+
+def test_bags_found_in_name_order_bag_folders_beside_files_links_and_staging_skipped(tmp_path):
+    """
+    By hand: one folder's bags (files and rosbag2 directories) in one name order, then
+    its sub-folders in name order; a link to a folder, a staging folder not searched.
+    """
+    runs = tmp_path / 'runs'
+    for folder in ('runs/b_bag', 'runs/d_bag', 'runs/c/z', 'runs/a', 'runs/x.partial',
+                   'elsewhere'):
+        (tmp_path / folder).mkdir(parents=True)
+    for bag in ('b_bag', 'd_bag'):
+        (runs / bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')
+        (runs / bag / 'run_0.mcap').write_bytes(b'x')
+    for name in ('runs/c.mcap', 'runs/a.db3', 'runs/e.mcap', 'runs/c/z/1.mcap',
+                 'runs/c/0.mcap', 'runs/a/2.mcap', 'runs/x.partial/3.mcap',
+                 'elsewhere/4.mcap', 'runs/notes.txt'):
+        (tmp_path / name).write_bytes(b'x')
+    (runs / 'linked').symlink_to(tmp_path / 'elsewhere', target_is_directory=True)
+    assert is_bag_directory(runs / 'b_bag') and not is_bag_directory(runs / 'c')
+    found = find_bags([runs])
+    assert [str(bag.relative_to(runs)) for bag, _ in found] == [
+        'a.db3', 'b_bag', 'c.mcap', 'd_bag', 'e.mcap', 'a/2.mcap', 'c/0.mcap', 'c/z/1.mcap']
+    assert {root for _, root in found} == {runs}
+    # A rosbag2 directory given: itself, found under its parent; given twice: once.
+    assert find_bags([runs / 'b_bag', str(runs / 'b_bag')]) == [(runs / 'b_bag', runs)]
+
+
+# -- tasks -------------------------------------------------------------------------------------
+
+def test_what_is_not_read_as_a_bag_and_why_in_the_words_said(tmp_path):
+    """Regular files and folders read; a FIFO, a device, a socket, links, a bad path not."""
+    regular = tmp_path / 'a.mcap'
+    regular.write_bytes(b'abc')
+    os.mkfifo(tmp_path / 'fifo.mcap')
+    listening = socket.socket(socket.AF_UNIX)
+    listening.bind(str(tmp_path / 'socket.mcap'))
+    try:
+        (tmp_path / 'to_fifo.mcap').symlink_to(tmp_path / 'fifo.mcap')
+        (tmp_path / 'to_null.mcap').symlink_to('/dev/null')
+        (tmp_path / 'to_file.mcap').symlink_to(regular)
+        (tmp_path / 'broken.mcap').symlink_to(tmp_path / 'gone')
+        said = {name: tasks.not_a_bag_file(tmp_path / name) for name in (
+            'a.mcap', '.', 'fifo.mcap', 'socket.mcap', 'to_fifo.mcap', 'to_null.mcap',
+            'to_file.mcap', 'broken.mcap', 'gone.mcap', 'a.mcap/x')}
+    finally:
+        listening.close()
+    assert said == {
+        'a.mcap': None, '.': None, 'to_file.mcap': None,
+        'fifo.mcap': 'not a regular file (a FIFO): not read',
+        'socket.mcap': 'not a regular file (a socket): not read',
+        'to_fifo.mcap': f'a symbolic link to {tmp_path / "fifo.mcap"}, not a regular file '
+                        '(a FIFO): not read',
+        'to_null.mcap': 'a symbolic link to /dev/null, not a regular file (a character '
+                        'device): not read',
+        'broken.mcap': f'a symbolic link to {tmp_path / "gone"}, which does not exist (a '
+                       'broken link): not read',
+        'gone.mcap': 'gone: which does not exist (a broken link): not read',
+        'a.mcap/x': 'cannot read: Not a directory'}
+
+
+def test_a_task_identifies_bags_by_hand_and_names_what_it_cannot_read(tmp_path):
+    """(path, (size, mtime ns), sha256) by os.stat and hashlib; (path, None, why) else."""
+    bag = tmp_path / 'a.mcap'
+    bag.write_bytes(b'some bytes')
+    os.mkfifo(tmp_path / 'fifo.mcap')
+    status = os.stat(bag)
+    assert tasks.identify_bag_files([bag, tmp_path / 'fifo.mcap']) == [
+        (str(bag), (10, status.st_mtime_ns), hashlib.sha256(b'some bytes').hexdigest()),
+        (str(tmp_path / 'fifo.mcap'), None, 'not a regular file (a FIFO): not read')]
+
+
+def test_a_bag_that_fails_gives_one_failure_row_with_its_reason(tmp_path, monkeypatch):
+    """Not a bag; a bug inside (said as internal); no layout: each a row, by hand."""
+    runs = tmp_path / 'site' / 'gantry_7'
+    runs.mkdir(parents=True)
+    bag = runs / 'r.mcap'
+    bag.write_bytes(b'xyz')
+    status, row = tasks.analyse(str(bag), str(tmp_path), 'd1', (3, 44))
+    assert status == 'failed'
+    assert row['failed_at'] % 1000 == 0 and row['failed_at'] > 1.7e18
+    assert dict(row, failed_at=0) == {
+        'digest': 'd1', 'bag': str(bag), 'bag_bytes': 3, 'bag_mtime_ns': 44,
+        'machine_id': 'site/gantry_7', 'machine_source': 'path',
+        'reason': f'{bag}: not an MCAP file (no MCAP magic at the start)', 'failed_at': 0}
+    assert tasks.analyse(str(bag), str(tmp_path), 'd1', (3, 44), 'r')[1]['bag'] == 'r'
+    assert tasks.analyse_batch([(str(bag), str(runs), 'd2', (3, 44))])[0][1]['machine_id'] \
+        == 'r'
+
+    def broken(path):
+        raise KeyError('segments')
+    monkeypatch.setattr(tasks, 'analyse_bag', broken)
+    assert tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]['reason'] == \
+        "internal error: KeyError: 'segments'"
+
+    def long(path):
+        raise ValueError('y' * 600)
+    monkeypatch.setattr(tasks, 'analyse_bag', long)
+    assert tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]['reason'] == \
+        'y' * 500 + '... (600 characters)'
+    monkeypatch.setattr(tasks, 'analyse_bag', lambda path: {'segments': []})
+    assert tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]['reason'] == 'no layout segment'
+
+    def unreadable(path, root):
+        raise PermissionError('no')
+    monkeypatch.setattr(tasks, 'machine_of', unreadable)
+    row = tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]
+    assert (row['machine_id'], row['machine_source']) == (str(bag), 'path')
+
+
+# -- store -------------------------------------------------------------------------------------
+
+def test_a_table_read_in_its_own_column_order_and_a_failed_write_leaves_nothing(tmp_path):
+    """Columns reordered, extra ones dropped; a type changed refused; a failed write."""
+    rows = [{'digest': 'd', 'bag': 'b', 'bag_bytes': 3, 'reason': 'r'}]
+    mixed = table(rows, FAILURE_SCHEMA)
+    shuffled = pa.table({name: mixed.column(name) for name in reversed(mixed.column_names)})
+    shuffled = shuffled.append_column('extra', pa.array([1]))
+    pq.write_table(shuffled, tmp_path / 'mixed.parquet')
+    got = store.read(tmp_path / 'mixed.parquet', FAILURE_SCHEMA)
+    assert got.schema.equals(FAILURE_SCHEMA) and got.to_pylist() == mixed.to_pylist()
+    other = mixed.set_column(2, 'bag_bytes', pa.array([3.0]))
+    pq.write_table(other, tmp_path / 'other.parquet')
+    with pytest.raises(ValueError) as caught:
+        store.read(tmp_path / 'other.parquet', FAILURE_SCHEMA)
+    assert str(caught.value) == (
+        f'{tmp_path / "other.parquet"}: not a cvc-balance fleet table of this version '
+        '(missing or different: bag_bytes (int64)); not overwritten: give another --out')
+    pq.write_table(pa.table({'x': [1]}), tmp_path / 'x.parquet')
+    with pytest.raises(ValueError) as caught:
+        store.read(tmp_path / 'x.parquet', RESULT_SCHEMA)
+    assert str(caught.value).startswith(
+        f'{tmp_path / "x.parquet"}: not a cvc-balance fleet table of this version (missing '
+        'or different: digest (string), bag (string), bag_bytes (int64), bag_mtime_ns '
+        '(int64), machine_id (string)); not overwritten')
+    (tmp_path / 'text.parquet').write_text('no')
+    with pytest.raises(ValueError) as caught:
+        store.read(tmp_path / 'text.parquet', FAILURE_SCHEMA)
+    assert str(caught.value).startswith(f'{tmp_path / "text.parquet"}: not a readable '
+                                        'Parquet table (')
+    assert str(caught.value).endswith('); not overwritten: give another --out')
+    # A write that cannot rename (a folder holds the name): the error, no staging file.
+    (tmp_path / 'full.parquet').mkdir()
+    (tmp_path / 'full.parquet' / 'keep').write_text('kept')
+    with pytest.raises(OSError):
+        store.write(tmp_path / 'full.parquet', mixed)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        'full.parquet', 'mixed.parquet', 'other.parquet', 'text.parquet', 'x.parquet']
+    store.write(tmp_path / 'ok.parquet', mixed)
+    assert pq.read_metadata(tmp_path / 'ok.parquet').row_group(0).column(0).compression \
+        == 'ZSTD'
+
+
+def test_the_tables_lock_is_held_while_the_block_runs(tmp_path):
+    """Another open of RESULTS.lock cannot take it in the block, and can after it."""
+    results = tmp_path / 'fleet.parquet'
+
+    def free():
+        with open(tmp_path / 'fleet.parquet.lock', 'a') as other:
+            try:
+                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return False
+            fcntl.flock(other, fcntl.LOCK_UN)
+            return True
+    with store.locked(results):
+        assert not free()
+    assert free()
+
+
+# -- engine: batches, known digests, lost tasks, the counts of a run -------------------------
+
+def test_digest_batches_by_count_and_bytes_by_hand():
+    """At most 32 bags and 64 MiB a task (a bag alone may be bigger); none for none."""
+    mib = 1 << 20
+    assert engine.digest_batches([], []) == []
+    assert engine.digest_batches(list(range(70)), [1] * 70) == \
+        [list(range(32)), list(range(32, 64)), list(range(64, 70))]
+    sizes = [40 * mib, 24 * mib, 1, 100 * mib, 3 * mib, 61 * mib, 1]
+    assert engine.digest_batches(list('abcdefg'), sizes) == \
+        [['a', 'b'], ['c'], ['d'], ['e', 'f'], ['g']]
+
+
+def test_bags_per_task_by_hand():
+    """min(16, 4 MiB // median size, bags // (4 workers)), at least 1."""
+    mib = 1 << 20
+    assert engine.automatic_batch([], 2) == 1
+    assert engine.automatic_batch([100_000] * 1000, 2) == 16
+    assert engine.automatic_batch([mib] * 1000, 2) == 4
+    assert engine.automatic_batch([3 * mib] * 1000, 2) == 1
+    assert engine.automatic_batch([5 * mib] * 1000, 2) == 1
+    # The median: sizes [10 KB x 3, 2 MiB x 4] sorted, the 4th (index 7 // 2 = 3).
+    assert engine.automatic_batch([2 * mib] * 4 + [10_000] * 3, 0) == 1
+    assert engine.automatic_batch([2 * mib] * 3 + [10_000] * 4, 0) == 1
+    assert engine.automatic_batch([2 * mib] * 3 + [mib] * 4 + [1] * 100, 1) == 16
+    assert engine.automatic_batch([2 * mib] * 60 + [10_000] * 4, 1) == 2
+    assert engine.automatic_batch([0] * 200, 1) == 16
+    # Never fewer than 4 tasks a worker: 40 bags on 2 workers, 5 a task.
+    assert engine.automatic_batch([1000] * 40, 2) == 5
+    assert engine.automatic_batch([1000] * 40, 3) == 3
+    assert engine.automatic_batch([1000] * 7, 2) == 1
+
+
+def test_a_lost_task_fails_each_of_its_bags(monkeypatch):
+    """A digest task: (path, None, why) each; an analysis task: a failure row each."""
+    monkeypatch.setattr(engine.time, 'time_ns', lambda: 1_234_567_891)
+    error = RuntimeError('worker died\nhard')
+    assert engine._lost(engine.identify_bag_files, ['a', 'b'], error) == [
+        ('a', None, 'worker lost: RuntimeError: worker died hard'),
+        ('b', None, 'worker lost: RuntimeError: worker died hard')]
+    assert engine._lost(engine.identify_bag_files, ['a'], KeyError('k' * 400)) == [
+        ('a', None, "worker lost: KeyError: '" + 'k' * 299 + '... (402 characters)')]
+    lost = engine._lost(engine.analyse_batch, [('/p/a', '/p', 'd1', (1, 2), 'a'),
+                                               ('/p/b', '/p', 'd2', (3, 4), 'b')], error)
+    assert lost == [('failed', {'digest': d, 'bag': b, 'bag_bytes': s[0], 'bag_mtime_ns': s[1],
+                                'machine_id': None, 'machine_source': None,
+                                'reason': 'worker lost: RuntimeError: worker died hard',
+                                'failed_at': 1_234_567_000})
+                    for d, b, s in (('d1', 'a', (1, 2)), ('d2', 'b', (3, 4)))]
+
+
+def test_known_digests_of_the_tables_by_bag_and_stat():
+    """Rows with a digest and a size; a failure of an unreadable bag (no digest) not."""
+    results = table([{'digest': 'd1', 'bag': 'a', 'bag_bytes': 3, 'bag_mtime_ns': 5},
+                     {'digest': 'd1', 'bag': 'a', 'bag_bytes': 3, 'bag_mtime_ns': 5}],
+                    RESULT_SCHEMA)
+    failures = table([{'digest': 'd2', 'bag': 'b', 'bag_bytes': 0, 'bag_mtime_ns': 0},
+                      {'digest': None, 'bag': 'c', 'bag_bytes': 1, 'bag_mtime_ns': 1},
+                      {'digest': 'd4', 'bag': 'e', 'bag_bytes': None, 'bag_mtime_ns': None}],
+                     FAILURE_SCHEMA)
+    assert engine._known_digests(results, failures) == {('a', (3, 5)): 'd1',
+                                                        ('b', (0, 0)): 'd2'}
+
+
+def test_a_runs_counts_what_it_skips_and_what_it_reads_again(tmp_path, monkeypatch):
+    """
+    By hand, run after run on one folder: a good bag, two copies of one bad bag, another.
+
+    Run 1: 4 found, 1 analysed, 2 failed, 1 duplicate. Run 2: nothing read again (the
+    digests kept by size and time), 1 already, 3 failed before. A bad bag
+    changed: hashed again, analysed again. Retried: both old failures replaced. (The
+    duplicate, in no table under its own name, is hashed again each run.)
+    """
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    shutil.copy(TILTED, runs / 'a.mcap')
+    (runs / 'b.mcap').write_bytes(b'bad')
+    (runs / 'c.mcap').write_bytes(b'bad')
+    (runs / 'd.mcap').write_bytes(b'worse')
+    out = tmp_path / 'fleet.parquet'
+    hashed = []
+    real = tasks.content_digest
+    monkeypatch.setattr(tasks, 'content_digest', lambda path: hashed.append(path) or real(path))
+
+    def counts(report):
+        return (report.found, report.already, report.failed_before, report.duplicates,
+                report.analysed, report.failed, report.rows)
+
+    first = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert counts(first) == (4, 0, 0, 1, 1, 2, 3)
+    assert (first.engine, first.workers, first.batch) == ('local', 1, 1)
+    assert first.samples == pq.read_table(out).column('accepted')[0].as_py() > 0
+    assert first.results == str(out) and first.failures == str(tmp_path /
+                                                                'fleet.failures.parquet')
+    assert sorted(first.new_failures) == [
+        (str(runs / name), f'{runs / name}: not an MCAP file (no MCAP magic at the start)')
+        for name in ('b.mcap', 'd.mcap')]
+    assert len(hashed) == 4
+    hashed.clear()
+    second = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert counts(second) == (4, 1, 3, 0, 0, 0, 0) and hashed == [str(runs / 'c.mcap')]
+    hashed.clear()
+    (runs / 'd.mcap').write_bytes(b'worst!')
+    third = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert counts(third) == (4, 1, 2, 0, 0, 1, 0)
+    assert hashed == [str(runs / 'c.mcap'), str(runs / 'd.mcap')]
+    failures = pq.read_table(tmp_path / 'fleet.failures.parquet').to_pydict()
+    assert sorted(failures['bag']) == [str(runs / n) for n in ('b.mcap', 'd.mcap', 'd.mcap')]
+    retried = engine.run_fleet([runs], out, engine='local', progress=False,
+                               retry_failures=True, batch=2)
+    assert counts(retried) == (4, 1, 0, 1, 0, 2, 0) and retried.batch == 2
+    # b's and the changed d's failures replaced; d's first content (no bag has it now) kept.
+    failures = pq.read_table(tmp_path / 'fleet.failures.parquet').to_pydict()
+    assert failures['bag'] == [str(runs / n) for n in ('d.mcap', 'b.mcap', 'd.mcap')]
+    assert pq.read_table(out).num_rows == 3
+
+
+def test_a_run_refuses_an_unknown_engine_and_a_scheduler_without_dask(tmp_path):
+    with pytest.raises(ValueError) as caught:
+        engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='spark')
+    assert str(caught.value) == "engine 'spark': give one of dask, local"
+    with pytest.raises(ValueError) as caught:
+        engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local',
+                         scheduler='tcp://x:1')
+    assert str(caught.value) == '--scheduler needs --engine dask'
+    assert list(tmp_path.iterdir()) == []
