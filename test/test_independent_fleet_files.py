@@ -350,8 +350,8 @@ def test_a_runs_counts_what_it_skips_and_what_it_reads_again(tmp_path, monkeypat
     assert counts(first) == (4, 0, 0, 1, 1, 2, 3)
     assert (first.engine, first.workers, first.batch) == ('local', 1, 1)
     assert first.samples == pq.read_table(out).column('accepted')[0].as_py() > 0
-    assert first.results == str(out) and first.failures == str(tmp_path /
-                                                                'fleet.failures.parquet')
+    assert (first.results, first.failures) == (str(out),
+                                               str(tmp_path / 'fleet.failures.parquet'))
     assert sorted(first.new_failures) == [
         (str(runs / name), f'{runs / name}: not an MCAP file (no MCAP magic at the start)')
         for name in ('b.mcap', 'd.mcap')]
