@@ -329,7 +329,11 @@ def test_bearing_life_read_from_the_table_each_run_once(tmp_path):
 
 
 def test_a_tables_missing_values_read_as_nan_or_false_and_machines_ranked(tmp_path):
-    """Nulls read back: a number as nan, a name as None; the machines by urgency."""
+    """
+    Nulls read back: a number as nan, a name as None; the machines by urgency.
+
+    Bug: a null text read as '?' (numpy's default fill of object arrays, ``filled(None)``).
+    """
     rows = [result_row('b', d, plane_I_g_mm=700.0 + 100.0 * d) for d in range(5)]
     rows += [result_row('a', d, plane_I_g_mm=100.0, plane_II_g_mm=None, grade=None,
                         layout_name=None if d == 3 else 'gantry') for d in range(4)]
@@ -340,6 +344,7 @@ def test_a_tables_missing_values_read_as_nan_or_false_and_machines_ranked(tmp_pa
     assert list(series) == ['a', 'b', 'c']
     a = series['a']
     assert np.isnan(a['amount_II']).all() and np.isnan(a['grade']).all()
+    assert a['layout_name'].tolist() == ['gantry'] * 3 + [None]
     assert a['identified_I'].tolist() == [False] * 4
     ranked = trends.machine_trends(path)
     assert [t.machine_id for t in ranked] == ['b', 'a', 'c']
