@@ -384,3 +384,142 @@ def test_a_run_refuses_an_unknown_engine_and_a_scheduler_without_dask(tmp_path):
                          scheduler='tcp://x:1')
     assert str(caught.value) == '--scheduler needs --engine dask'
     assert list(tmp_path.iterdir()) == []
+
+
+# -- rows: a replay record flattened, by hand ---------------------------------------------------
+
+def plane_record(k):
+    return {'z': -0.1 + 0.2 * k, 'g_mm': 100.0 + k, 'angle_deg': 10.0 + k,
+            'permissible_g_mm': 500.0 + k, 'fraction': 0.2 + k, 'correction_mass_kg': 0.01 + k,
+            'correction_angle_deg': 190.0 + k}
+
+
+def vector_record(base):
+    return {'static_unbalance': {'kg_m': base, 'angle_deg': base + 1, 'ci95_kg_m': base + 2},
+            'planes': [{'g_mm': base + 10 * k, 'angle_deg': base + 10 * k + 1,
+                        'ci95_g_mm': base + 10 * k + 2} for k in (1, 2)]}
+
+
+def use(base):
+    return {'life_used': base, 'l10_hours': base + 1, 'equivalent_load_N': base + 2,
+            'unbalance_share': base + 3}
+
+
+def segment_record(k, balance=True, identified=True, grade=True, source='measured', life=True):
+    verdict = {'equivalent_grade': 2.5 + k, 'finest_grade_met': 6.3, 'within_grade': k == 0,
+               'level': 'OK', 'verdict': 'WITHIN G 6.3', 'layout_equivalent_grade': 1.5,
+               'layout_level': 'WARN', 'layout_verdict': 'v', 'disagreement': 'd',
+               'source': source, 'reason': 'why'}
+    return {
+        'layout': {'name': f'layout {k}', 'digest': f'ld{k}'}, 'from': 99.5,
+        'first_sample': 100.0 + k, 'last_sample': 4600.0 + k, 'samples': 50 + k,
+        'top_speed': 20.0 + k, 'peak_load_N': 900.0 + k,
+        'peak_support_load_N': {'front': 400.0 + k, 'rear': 500.0 + k},
+        'warnings': [f'w{k}'], 'model': 'rigid bodies', 'verdict': verdict,
+        'balance': {'grade': 6.3, 'service_speed': 23.27, 'speed_source': 'service speed',
+                    'permissible_g_mm': 1000.0, 'static_g_mm': 80.0, 'static_angle_deg': 30.0,
+                    'planes': [plane_record(0), plane_record(1)]} if balance else None,
+        'identified': {'readings': 1374, 'revolutions': 18.3, 'identifiable': True,
+                       'fit': {'rms_N': 21.0}, 'identified': vector_record(1.0),
+                       'residual': vector_record(5.0),
+                       'grade': {'fractions': [0.4, 0.6], 'equivalent_grade': 3.3,
+                                 'level': 'OK'} if grade else None} if identified else None,
+        'life': [{'name': 'front', 'measured': use(0.1), 'layout': use(0.2)},
+                 {'name': 'rear', 'measured': None, 'layout': use(0.3)}] if life else None}
+
+
+def test_a_replay_record_flattened_to_rows_by_hand(tmp_path):
+    """
+    Run columns on each segment; a segment's numbers, planes, verdict, identification and
+    bearings where the record has them, null where not; times to the microsecond.
+    """
+    from cvc_balance.fleet.rows import result_rows
+    record = {'start': 12.0000026, 'end': 30.5, 'samples': 700, 'accepted': 690,
+              'rejected': 4, 'dropped': 5, 'skipped': 1, 'problems': ('p1', 'p2'),
+              'segments': [segment_record(0),
+                           segment_record(1, balance=False, identified=False, life=False,
+                                          source='layout'),
+                           segment_record(2, grade=False, source='layout')]}
+    rows = result_rows(record, 'dg', Path('/runs/a.mcap'), (123, 456), ('m1', 'bag'),
+                       7_000, 0.25)
+    assert len(rows) == 3
+    run = {'digest': 'dg', 'bag': '/runs/a.mcap', 'bag_bytes': 123, 'bag_mtime_ns': 456,
+           'machine_id': 'm1', 'machine_source': 'bag', 'run_start': 12_000_003_000,
+           'run_end': 30_500_000_000, 'samples': 700, 'accepted': 690, 'rejected': 4,
+           'dropped': 5, 'skipped': 1, 'problems': ['p1', 'p2'], 'segments': 3,
+           'analysed_at': 7_000, 'analysis_seconds': 0.25}
+    for k, row in enumerate(rows):
+        assert {key: row[key] for key in run} == run
+        assert {key: row[key] for key in (
+            'segment', 'layout_name', 'layout_digest', 'layout_from', 'segment_start',
+            'segment_end', 'segment_samples', 'top_speed', 'peak_load_N',
+            'peak_support_load_N', 'warnings', 'model')} == {
+            'segment': k, 'layout_name': f'layout {k}', 'layout_digest': f'ld{k}',
+            'layout_from': 99_500_000_000, 'segment_start': (100 + k) * 10**9,
+            'segment_end': (4600 + k) * 10**9, 'segment_samples': 50 + k,
+            'top_speed': 20.0 + k, 'peak_load_N': 900.0 + k,
+            'peak_support_load_N': [('front', 400.0 + k), ('rear', 500.0 + k)],
+            'warnings': [f'w{k}'], 'model': 'rigid bodies'}
+        assert {key: row[key] for key in (
+            'equivalent_grade', 'finest_grade_met', 'within_grade', 'level', 'verdict',
+            'verdict_source', 'verdict_reason', 'disagreement', 'layout_equivalent_grade',
+            'layout_level', 'layout_verdict')} == {
+            'equivalent_grade': 2.5 + k, 'finest_grade_met': 6.3, 'within_grade': k == 0,
+            'level': 'OK', 'verdict': 'WITHIN G 6.3',
+            'verdict_source': ('measured', 'layout', 'layout')[k],
+            'verdict_reason': 'why', 'disagreement': 'd', 'layout_equivalent_grade': 1.5,
+            'layout_level': 'WARN', 'layout_verdict': 'v'}
+        assert row['running_hours'] == 4500.0 / 3600.0
+    first, second, third = rows
+    balance = {'grade': 6.3, 'service_speed': 23.27, 'speed_source': 'service speed',
+               'permissible_g_mm': 1000.0, 'static_g_mm': 80.0, 'static_angle_deg': 30.0}
+    for key, value in balance.items():
+        assert (first[key], second[key], third[key]) == (value, None, value), key
+    for p, k in (('I', 0), ('II', 1)):
+        for key, value in plane_record(k).items():
+            assert (first[f'plane_{p}_{key}'], f'plane_{p}_{key}' in second) == (value, False)
+    identified = {'identified_readings': 1374, 'identified_revolutions': 18.3,
+                  'identifiable': True, 'fit_rms_N': 21.0}
+    for what, base in (('identified', 1.0), ('residual', 5.0)):
+        identified.update({f'{what}_static_kg_m': base,
+                           f'{what}_static_kg_m_angle_deg': base + 1,
+                           f'{what}_static_kg_m_ci95': base + 2})
+        for p, k in (('I', 1), ('II', 2)):
+            identified.update({f'{what}_plane_{p}_g_mm': base + 10 * k,
+                               f'{what}_plane_{p}_g_mm_angle_deg': base + 10 * k + 1,
+                               f'{what}_plane_{p}_g_mm_ci95': base + 10 * k + 2})
+    graded = {'identified_plane_I_fraction': 0.4, 'identified_plane_II_fraction': 0.6,
+              'identified_equivalent_grade': 3.3, 'identified_level': 'OK'}
+    assert {key: first[key] for key in {**identified, **graded}} == {**identified, **graded}
+    assert {key: third[key] for key in identified} == identified
+    assert not any(key in second for key in {**identified, **graded})
+    assert not any(key in third for key in graded)
+    # Bearings: measured where the verdict of record is measured and the cell told it.
+    assert first['bearings'] == [dict(use(0.1), support='front', source='measured'),
+                                 dict(use(0.3), support='rear', source='layout')]
+    assert second['bearings'] is None
+    assert third['bearings'] == [dict(use(0.2), support='front', source='layout'),
+                                 dict(use(0.3), support='rear', source='layout')]
+    # The table takes every row as its schema says; pyarrow reads them back.
+    path = tmp_path / 'rows.parquet'
+    pq.write_table(table(rows, RESULT_SCHEMA), path)
+    back = pq.read_table(path).to_pylist()
+    assert back[0]['identified_level'] == 'OK' and back[1]['plane_I_g_mm'] is None
+    assert back[2]['bearings'][0] == dict(use(0.2), support='front', source='layout')
+    assert back[0]['run_start'].timestamp() == 12.000003
+
+
+def test_a_segment_without_samples_has_no_running_hours():
+    from cvc_balance.fleet.rows import bearing_columns
+    segment = segment_record(0)
+    segment.update(first_sample=None, last_sample=None)
+    assert bearing_columns(segment)['running_hours'] is None
+    segment['life'] = []
+    assert bearing_columns(segment) == {'running_hours': None, 'bearings': None}
+
+
+def test_a_failure_row_by_hand():
+    from cvc_balance.fleet.rows import failure_row
+    assert failure_row('d', Path('/x/b.mcap'), (1, 2), ('m', 'path'), 'why', 5_000) == {
+        'digest': 'd', 'bag': '/x/b.mcap', 'bag_bytes': 1, 'bag_mtime_ns': 2,
+        'machine_id': 'm', 'machine_source': 'path', 'reason': 'why', 'failed_at': 5_000}
