@@ -256,3 +256,108 @@ def test_explanations_by_hand_each_candidate():
     assert evidence.explain(MODEL, diff(0j, 0j)) is None
     assert evidence.explain(MODEL, diff(complex(math.nan, 0.0), 1e-3)) is None
     assert evidence.explain(MODEL, diff(complex(0.0, math.inf), 1e-3)) is None
+
+
+# -- explain's thresholds on a bench rotor where every candidate is worked out by hand -------
+
+def bench(extra=0, planes=True, radius=1.0, parts=True):
+    """
+    A hub on the axis (no moment: never a candidate) and part A, 1 kg at 0.5 m, 0 deg, z 0.5
+    m: with planes at -+0.5 m its plane vectors are e = (0, 0.5) kg m. ``extra`` tiny parts
+    on the axis; no planes: one support; ``radius`` the correction radius (None: none).
+    """
+    parts_ = [{'name': 'hub', 'mass': 10.0, 'radius': 0.0, 'angle_deg': 0.0, 'z': 0.0}]
+    if parts:
+        parts_.append({'name': 'A', 'mass': 1.0, 'radius': 0.5, 'angle_deg': 0.0, 'z': 0.5})
+    parts_ += [{'name': f'p{k}', 'mass': 0.001, 'radius': 0.0, 'angle_deg': 0.0, 'z': 0.0}
+               for k in range(extra)]
+    balancing = {'grade': 6.3, 'service_speed': 10.0}
+    if radius:
+        balancing['correction_radius'] = radius
+    if planes:
+        balancing['planes'] = [-0.5, 0.5]
+        supports = [{'name': 'left', 'z': -0.5}, {'name': 'right', 'z': 0.5, 'axial': True}]
+    else:
+        supports = [{'name': 'only', 'z': 0.0, 'axial': True}]
+    return RotorModel.from_layout(parse_layout({
+        'name': 'bench', 'components': parts_, 'supports': supports,
+        'gravity': [0.0, -9.8, 0.0], 'balancing': balancing}))
+
+
+def residual_vectors(v_i, v_ii, ci95=0.0):
+    from types import SimpleNamespace as Plane
+    return Plane(planes=[(-0.5, Plane(value=v_i, ci95=ci95)),
+                         (0.5, Plane(value=v_ii, ci95=ci95))])
+
+
+HEAVIER = 'as if A were +2 kg heavier (its 1 kg at 0.5 m, 0 deg)'
+
+
+def test_an_explanation_within_a_quarter_of_the_residual_or_its_radius_by_hand():
+    """
+    Residual (a i, 1): A heavier by the real projection 2 Re(v_II) (left |a|), an unlisted
+    mass leaving sqrt 2 |m| |Im(v_II / m)|, m = 1 + a i (more). Offered when |a| <= a
+    quarter of sqrt(a^2 + 1) (a = 0.255: 0.2580; a = 0.27: 0.2589 < 0.27), or within the
+    residual's radius sqrt(2) c (c = 0.195: 0.2758; 0.1: 0.1414; inf: not told, 0).
+    """
+    model = bench()
+    for a in (0.255, 0.27):
+        unlisted = math.sqrt(2) * abs(1 + a * 1j) * abs((1 / (1 + a * 1j)).imag)
+        assert unlisted > 0.25 * math.sqrt(a * a + 1)
+    assert 0.255 <= 0.25 * math.sqrt(0.255 ** 2 + 1) and 0.27 > 0.25 * math.sqrt(0.27 ** 2 + 1)
+    assert evidence.explain(model, residual_vectors(0.255j, 1.0)) == HEAVIER
+    assert evidence.explain(model, residual_vectors(0.27j, 1.0)) is None
+    assert evidence.explain(model, residual_vectors(0.27j, 1.0, 0.195)) == HEAVIER
+    assert evidence.explain(model, residual_vectors(0.27j, 1.0, 0.1)) is None
+    assert evidence.explain(model, residual_vectors(0.27j, 1.0, math.inf)) is None
+
+
+def test_a_listed_part_only_when_it_fits_as_well_to_1e_9_of_the_residual():
+    """
+    Residual (1e-6, 1e-5) kg m: an unlisted mass fits exactly (both planes at 0 deg), A
+    heavier leaves 1e-6, a tenth of it: the unlisted mass, 0.011 g at 1 m, z 0.409 m.
+    Residual (0, -0.45): A's scale exactly -0.9 (not offered: more than 90 % lighter),
+    missing leaves 0.05; the unlisted mass fits exactly.
+    """
+    model = bench()
+    assert evidence.explain(model, residual_vectors(1e-6, 1e-5)) == (
+        'as if an unlisted 0 g at the correction radius 1 m were at 0 deg, z 0.409 m (or a '
+        'part there heavier than the layout says)')
+    assert -0.5 + 1e-5 / 1.1e-5 == pytest.approx(0.409, abs=5e-4)
+    assert (0.5 * -0.45) / 0.5 ** 2 == -0.9
+    assert evidence.explain(model, residual_vectors(0j, -0.45)) == (
+        'as if an unlisted 450 g at the correction radius 1 m were at 180 deg, z 0.500 m (or '
+        'a part there heavier than the layout says)')
+
+
+def test_explanations_of_a_static_residual_and_without_a_correction_radius():
+    """
+    One support, no planes: the static residual 0.2 i kg m; A (moment 0.5) heavier leaves
+    0.2, turned round leaves 0.04, an unlisted 200 g at 1 m, 90 deg fits exactly.
+    Every part on the axis and no correction radius: the unlisted mass in g mm.
+    """
+    from types import SimpleNamespace as Static
+    model = bench(planes=False)
+    assert model.layout.correction_planes() is None
+    static = Static(planes=[], static=Static(value=0.2j, ci95=0.0))
+    assert evidence.explain(model, static) == (
+        'as if an unlisted 200 g at the correction radius 1 m were at 90 deg (or a part '
+        'there heavier than the layout says)')
+    axis = bench(radius=None, parts=False)
+    assert axis.layout.correction_radius() == 0.0
+    assert evidence.explain(axis, residual_vectors(0.001, 0.002)) == (
+        'as if an unlisted 3000 g mm were at 0 deg, z 0.167 m (or a part there heavier than '
+        'the layout says)')
+
+
+def test_parts_searched_in_layouts_of_up_to_2000_components():
+    """Residual (0, 0.25): A +0.5 kg heavier among 2000 parts; beyond, the unlisted mass."""
+    assert evidence.MAX_CANDIDATES == 2000
+    many = bench(extra=1998)
+    assert len(many.layout.components) == 2000
+    assert evidence.explain(many, residual_vectors(0j, 0.25)) == \
+        'as if A were +0.5 kg heavier (its 1 kg at 0.5 m, 0 deg)'
+    more = bench(extra=1999)
+    assert evidence.explain(more, residual_vectors(0j, 0.25)) == (
+        'as if an unlisted 250 g at the correction radius 1 m were at 0 deg, z 0.500 m (or a '
+        'part there heavier than the layout says)')
