@@ -113,6 +113,8 @@ def test_machines_ranked_by_the_bearing_with_the_fewest_hours_left():
     assert [t.machine_id for t in ranked] == ['a', 'b', 'd', 'c', 'e', 'f']
     tie = machine('0', [bearing('x', 0.1, 80.0)])
     assert [t.machine_id for t in trends.life_ranked([a, tie])] == ['0', 'a']
+    unused = machine('z', [bearing('x', 0.0, None)])
+    assert [t.machine_id for t in trends.life_ranked([e, unused])] == ['z', 'e']
 
 
 def plane(name, status, fraction, leaves=None):
@@ -245,28 +247,39 @@ def test_two_planes_their_epochs_and_a_plane_that_misses_runs():
 
 def test_a_machines_summary_as_json_by_hand():
     """Dates in ISO 8601 with Z, numbers not finite as null, every field by hand."""
-    p = PlaneTrend('I', np.array([START_NS, START_NS + DAY_NS]), np.array([300.0, 320.0]),
-                   np.array([5.0, np.nan]), np.array([900.0, 1000.0]), np.array([0, 0]),
-                   np.array([True, False]), drift=2.5, drift_ci95=math.nan,
-                   now_fraction=0.32, status=LEAVES, leaves=START + timedelta(days=3),
-                   leaves_earliest=START + timedelta(days=2, microseconds=5))
+    p = PlaneTrend('I', START_NS + np.arange(3) * DAY_NS, np.array([300.0, 310.0, 320.0]),
+                   np.array([5.0, np.nan, 6.0]), np.array([900.0, 950.0, 1000.0]),
+                   np.zeros(3, int), np.array([True, False, True]), drift=2.5,
+                   drift_ci95=0.75, now_fraction=0.32, status=LEAVES,
+                   leaves=START + timedelta(days=3),
+                   leaves_earliest=START + timedelta(days=2, microseconds=5),
+                   leaves_latest=START + timedelta(days=9))
+    q = PlaneTrend('II', START_NS + np.arange(3) * DAY_NS, np.array([1.0, 2.0, 3.0]),
+                   np.full(3, np.nan), np.full(3, 50.0), np.zeros(3, int), np.zeros(3, bool),
+                   drift=math.nan, drift_ci95=math.inf, now_fraction=math.nan)
     change = LayoutChange(START + timedelta(hours=1), 'd1', 'd2',
                           {'I': (12.5, math.inf), 'II': (-3.0, 1.5)})
-    bearing = BearingTrend('front', 4, 1, 0.25, 12.0, duty_per_hour=0.01, left_hours=75.0,
-                           worn_out=START + timedelta(days=400))
-    m = MachineTrend('m1', 2, START, START + timedelta(days=1), 'gantry', 6.3, [p], [change],
-                     status=LEAVES, worst_plane='I', leaves=START + timedelta(days=3),
-                     bearings=[bearing])
+    bearing = BearingTrend('front', 4, 1, 0.25, 12.0, duty_per_hour=0.01, duty_per_day=0.002,
+                           left_hours=75.0, worn_out=START + timedelta(days=400))
+    idle = BearingTrend('rear', 1, 0, 0.0, 0.0)
+    m = MachineTrend('m1', 3, START, START + timedelta(days=2), 'gantry', 6.3, [p, q],
+                     [change], status=LEAVES, worst_plane='I', leaves=START + timedelta(days=3),
+                     bearings=[bearing, idle])
     assert trends.trend_summary(m) == {
-        'machine_id': 'm1', 'status': 'LEAVES GRADE', 'runs': 2,
-        'first_run': '2025-10-09T08:53:20Z', 'last_run': '2025-10-10T08:53:20Z',
+        'machine_id': 'm1', 'status': 'LEAVES GRADE', 'runs': 3,
+        'first_run': '2025-10-09T08:53:20Z', 'last_run': '2025-10-11T08:53:20Z',
         'layout': 'gantry', 'grade': 6.3, 'worst_plane': 'I',
         'leaves_grade': '2025-10-12T08:53:20Z',
-        'planes': [{'plane': 'I', 'status': 'LEAVES GRADE', 'runs': 2, 'identified_runs': 1,
+        'planes': [{'plane': 'I', 'status': 'LEAVES GRADE', 'runs': 3, 'identified_runs': 2,
                     'last_g_mm': 320.0, 'permissible_g_mm': 1000.0, 'fraction_now': 0.32,
-                    'drift_g_mm_per_day': 2.5, 'drift_ci95_g_mm_per_day': None,
+                    'drift_g_mm_per_day': 2.5, 'drift_ci95_g_mm_per_day': 0.75,
                     'leaves_grade': '2025-10-12T08:53:20Z',
                     'leaves_grade_earliest': '2025-10-11T08:53:20.000005Z',
+                    'leaves_grade_latest': '2025-10-18T08:53:20Z'},
+                   {'plane': 'II', 'status': 'TOO FEW RUNS', 'runs': 3, 'identified_runs': 0,
+                    'last_g_mm': 3.0, 'permissible_g_mm': 50.0, 'fraction_now': None,
+                    'drift_g_mm_per_day': None, 'drift_ci95_g_mm_per_day': None,
+                    'leaves_grade': None, 'leaves_grade_earliest': None,
                     'leaves_grade_latest': None}],
         'layout_changes': [{'at': '2025-10-09T09:53:20Z', 'from_digest': 'd1',
                             'to_digest': 'd2',
@@ -274,8 +287,47 @@ def test_a_machines_summary_as_json_by_hand():
                                       'II': {'g_mm': -3.0, 'ci95_g_mm': 1.5}}}],
         'bearings': [{'support': 'front', 'runs': 4, 'measured_runs': 1, 'life_used': 0.25,
                       'running_hours': 12.0, 'life_per_running_hour': 0.01,
-                      'life_per_day': None, 'hours_left': 75.0,
-                      'rating_life_reached': '2026-11-13T08:53:20Z'}]}
+                      'life_per_day': 0.002, 'hours_left': 75.0,
+                      'rating_life_reached': '2026-11-13T08:53:20Z'},
+                     {'support': 'rear', 'runs': 1, 'measured_runs': 0, 'life_used': 0.0,
+                      'running_hours': 0.0, 'life_per_running_hour': None,
+                      'life_per_day': None, 'hours_left': None,
+                      'rating_life_reached': None}]}
+
+
+def test_the_line_and_band_of_an_epoch_of_one_run_and_of_a_precise_fit():
+    """
+    Epochs a a a a b (b: the last run alone): the default epoch is b. A fit to 0.01 g mm:
+    a band far under 1 g mm; each against numpy least squares, the band
+    t sqrt(s^2 g' (X'X)^-1 g), g = (epoch indicator, days).
+    """
+    from scipy import stats
+    days = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    wiggle = np.array([0.01, -0.02, 0.0, 0.02, 0.005])
+    amounts = 500.0 + 0.2 * days + 30.0 * (days == 40.0) + wiggle
+    fitted = trends.fit_machine('m', series(days, amounts, ['a'] * 4 + ['b']))
+    (p,) = fitted.planes
+    design = np.column_stack([days < 40, days == 40, days]).astype(float)
+    x, *_ = np.linalg.lstsq(design, amounts, rcond=None)
+    s2 = np.sum((amounts - design @ x) ** 2) / 2
+    inverse = np.linalg.inv(design.T @ design)
+    t = stats.t.ppf(0.975, 2)
+    at = START_NS + np.array([15, 60]) * DAY_NS
+    for epoch, level in ((0, x[0]), (1, x[1])):
+        g = np.column_stack([np.full(2, epoch == 0), np.full(2, epoch == 1),
+                             [15.0, 60.0]]).astype(float)
+        half = t * np.sqrt(s2 * np.einsum('ij,jk,ik->i', g, inverse, g))
+        assert np.allclose(p.line(at, epoch), level + x[2] * np.array([15.0, 60.0]),
+                           rtol=1e-12)
+        assert np.allclose(p.band(at, epoch), half, rtol=1e-9), (epoch, half)
+        assert half.max() < 0.5
+    assert np.array_equal(p.line(at), p.line(at, 1)) and np.array_equal(p.band(at),
+                                                                        p.band(at, 1))
+    (change,) = fitted.changes
+    e = np.array([-1.0, 1.0, 0.0])
+    assert change.steps['I'][0] == pytest.approx(x[1] - x[0], rel=1e-9)
+    assert change.steps['I'][1] == pytest.approx(t * math.sqrt(s2 * e @ inverse @ e), rel=1e-9)
+    assert change.steps['I'][1] < 0.5
 
 
 def result_row(machine, day, digest='d1', analysed=0, **columns):
@@ -353,3 +405,8 @@ def test_a_tables_missing_values_read_as_nan_or_false_and_machines_ranked(tmp_pa
     assert ranked[2].urgency == (3, 0.0, 'c')
     assert trends.read_series(path, machine='z') == {}
     assert trends.machine_trends(path, machine='z') == []
+    # Projected from a date given: 'a' (100 of its 1000 g mm, no drift) stays; 'b', 100 g
+    # mm a day from 1100 at day 4, is out of grade from that date on too.
+    later = trends.machine_trends(path, machine='b', now=START + timedelta(days=400))
+    assert later[0].planes[0].now_fraction == pytest.approx((1100 + 396 * 100) / 1000,
+                                                            rel=1e-9)
