@@ -410,3 +410,57 @@ def test_a_tables_missing_values_read_as_nan_or_false_and_machines_ranked(tmp_pa
     later = trends.machine_trends(path, machine='b', now=START + timedelta(days=400))
     assert later[0].planes[0].now_fraction == pytest.approx((1100 + 396 * 100) / 1000,
                                                             rel=1e-9)
+
+
+def test_the_fewest_runs_fitted_and_runs_within_a_day():
+    """
+    Three runs of one layout (1 degree of freedom): fitted, the drift numpy's polyfit
+    slope; runs hours apart (less than a day between first and last): fitted too.
+    """
+    three = trends.fit_machine('m', series([0.0, 5.0, 11.0], [300.0, 330.0, 351.0]))
+    slope = np.polyfit([0.0, 5.0, 11.0], [300.0, 330.0, 351.0], 1)[0]
+    assert three.planes[0].drift == pytest.approx(slope, rel=1e-12)
+    assert three.planes[0].status != FEW
+    hours = np.array([0.0, 3.0, 7.0, 11.0, 20.0]) / 24.0
+    amounts = np.array([300.0, 301.0, 305.0, 306.0, 310.0])
+    quick = trends.fit_machine('m', series(hours, amounts)).planes[0]
+    assert quick.drift == pytest.approx(np.polyfit(hours, amounts, 1)[0], rel=1e-12)
+
+
+def test_too_few_runs_are_judged_by_the_last_run_and_its_share():
+    """Three runs, two layouts (no degree of freedom): the last amount over the last share."""
+    data = series([0.0, 5.0, 9.0], [300.0, 500.0, 520.0], ['a', 'b', 'b'])
+    data['permissible_I'] = np.array([1000.0, 900.0, 800.0])
+    (plane,) = trends.fit_machine('m', data).planes
+    assert plane.status == FEW and plane.now_fraction == 520.0 / 800.0
+
+
+def test_a_plane_with_no_run_and_a_layout_of_one_run_between_two():
+    """
+    Plane I never measured: only plane II, its 95 % radii kept. Layouts a a a b c c c: the
+    step b -> c is a_c - a_b (numpy least squares with a column per layout).
+    """
+    days = np.array([0.0, 8.0, 17.0, 25.0, 33.0, 41.0, 50.0])
+    digests = ['a', 'a', 'a', 'b', 'c', 'c', 'c']
+    noise = np.array([2.0, -3.0, 1.0, 0.0, -2.0, 3.0, -1.0])
+    amounts = np.array([100.0, 100.0, 100.0, 160.0, 130.0, 130.0, 130.0]) + days + noise
+    data = series(days, np.full(7, np.nan), digests)
+    data['amount_II'], data['ci95_II'] = amounts, np.arange(7.0)
+    data['identified_II'] = np.ones(7, bool)
+    fitted = trends.fit_machine('m', data)
+    (plane,) = fitted.planes
+    assert plane.plane == 'II' and plane.ci95.tolist() == list(range(7))
+    design = np.column_stack([[d == e for d in digests] for e in 'abc'] + [days]).astype(float)
+    x, *_ = np.linalg.lstsq(design, amounts, rcond=None)
+    first, second = fitted.changes
+    assert first.steps['II'][0] == pytest.approx(x[1] - x[0], rel=1e-9)
+    assert second.steps['II'][0] == pytest.approx(x[2] - x[1], rel=1e-9)
+    assert 'I' not in first.steps
+
+
+def test_a_bearing_whose_life_went_in_the_first_run_of_its_layout():
+    """All of the latest layout's life used in its first run: no daily duty, no date."""
+    early = life_series([0, 4, 9], [0.1, 0.0, 0.0], [1, 1, 1], ['d'] * 3, [False] * 3)
+    (b,) = trends.bearing_trends({'early': early})
+    assert b.duty_per_day == 0.0 and b.worn_out is None
+    assert b.duty_per_hour == pytest.approx(0.1 / 3) and b.left_hours == pytest.approx(27.0)
