@@ -186,8 +186,13 @@ def test_a_residual_over_half_its_share_warns_an_ok_rotor_and_a_custom_share():
     # A grade asked for (G 2.5): the same rotor out of it, measured.
     strict = verdict_of_record(MODEL, estimate(measured), grade=2.5)
     assert strict.level == 'ERROR' and strict.words == 'OUT OF G 2.5'
-    warned = verdict_of_record(MODEL, estimate(measured), warn_fraction=0.5)
-    assert warned.measured.level == 'WARN'
+    # The layout judged at G 2.5 too: its 2.4995 within, over 0.8 of it: WARN.
+    declared = grade_by_hand(DECLARED)
+    assert 0.8 * 2.5 < declared <= 2.5
+    assert (strict.layout.words, strict.layout.level) == ('WITHIN G 2.5', 'WARN')
+    warned = verdict_of_record(MODEL, estimate(measured), warn_fraction=0.3)
+    assert 0.3 * 6.3 < declared < grade_by_hand(measured)
+    assert (warned.measured.level, warned.layout.level) == ('WARN', 'WARN')
 
 
 def test_a_disagreement_said_for_people_by_hand():
@@ -201,6 +206,11 @@ def test_a_disagreement_said_for_people_by_hand():
                           'angle_deg': 225.0, 'ci95_g_mm': pytest.approx(100.0, rel=1e-14),
                           'permissible_g_mm': 4000.0, 'fraction': d.fraction}
     assert evidence.disagreement_text(()) == ''
+    assert evidence.disagreement_text((d,)) == \
+        f'the rotor is not what its layout says: {d.describe()}'
+    # Exactly half the share (0.5 x 0.08 = 0.04 to the bit): no disagreement.
+    assert evidence.disagreeing([('I', -0.12, 0.04, 0.01, 0.08)]) == ()
+    assert evidence.disagreeing([('I', -0.12, 0.04 + 1e-12, 0.01, 0.08)])[0].z == -0.12
     assert evidence.disagreement_text((d, d), 'why') == (
         f'the rotor is not what its layout says: {d.describe()}, {d.describe()}; why')
 
