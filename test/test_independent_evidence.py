@@ -189,7 +189,7 @@ def test_a_residual_over_half_its_share_warns_an_ok_rotor_and_a_custom_share():
     # The layout judged at G 2.5 too: its 2.4995 within, over 0.8 of it: WARN.
     declared = grade_by_hand(DECLARED)
     assert 0.8 * 2.5 < declared <= 2.5
-    assert (strict.layout.words, strict.layout.level) == ('WITHIN G 2.5', 'WARN')
+    assert (strict.layout.words, strict.layout.level) == ('WITHIN G 2.5, NEAR ITS LIMIT', 'WARN')
     warned = verdict_of_record(MODEL, estimate(measured), warn_fraction=0.3)
     assert 0.3 * 6.3 < declared < grade_by_hand(measured)
     assert (warned.measured.level, warned.layout.level) == ('WARN', 'WARN')
