@@ -226,6 +226,11 @@ def test_two_planes_their_epochs_and_a_plane_that_misses_runs():
     design = np.column_stack([[d == e for d in digests] for e in 'abc'] + [days]).astype(float)
     x, *_ = np.linalg.lstsq(design, amounts, rcond=None)
     assert np.allclose(one.levels + [one.drift], x, rtol=1e-12, atol=0)
+    from scipy import stats
+    s2 = np.sum((amounts - design @ x) ** 2) / (len(days) - 4)
+    half = stats.t.ppf(0.975, len(days) - 4) * math.sqrt(
+        s2 * np.linalg.inv(design.T @ design)[3, 3])
+    assert one.drift_ci95 == pytest.approx(half, rel=1e-9)
     assert two.epoch_ids.tolist() == [1, 2] and two.epoch.tolist() == [0] * 3 + [1] * 3
     assert two.identified.all() and not one.identified.any()
     first, last = fitted.changes
@@ -464,3 +469,56 @@ def test_a_bearing_whose_life_went_in_the_first_run_of_its_layout():
     (b,) = trends.bearing_trends({'early': early})
     assert b.duty_per_day == 0.0 and b.worn_out is None
     assert b.duty_per_hour == pytest.approx(0.1 / 3) and b.left_hours == pytest.approx(27.0)
+
+
+def test_masked_values_and_dates_by_hand():
+    """Masked numbers nan, flags False, texts None, whatever lies under the mask; ns floored."""
+    texts = np.ma.array(np.array(['a', 'b', 'c'], dtype=object), mask=[False, True, False])
+    assert trends._filled(texts).tolist() == ['a', None, 'c']
+    flags = np.ma.array([True, True, False], mask=[False, True, False])
+    assert trends._filled(flags).tolist() == [True, False, False]
+    numbers = np.ma.array([1.5, 2.5], mask=[True, False])
+    assert np.isnan(trends._filled(numbers)[0]) and trends._filled(numbers)[1] == 2.5
+    counts = np.ma.array(np.array([4, 5], dtype=np.int64), mask=[False, True])
+    assert trends._filled(counts).tolist() == [4, 5]
+    plain = np.array([1.0])
+    assert trends._filled(plain) is plain
+    epoch = datetime(1970, 1, 1, tzinfo=timezone.utc)
+    assert trends._date(1_999) == epoch + timedelta(microseconds=1)
+
+
+def test_a_stable_plane_is_not_projected_and_its_share_is_the_last_runs():
+    """
+    No significant drift: no date, no interval. A share changed at the last run (a new
+    layout): the level over that share.
+    """
+    days = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    flat = trends.fit_machine('m', series(days, [500.0, 520.0, 480.0, 510.0, 490.0]))
+    plane = flat.planes[0]
+    assert plane.status == STABLE
+    assert (plane.leaves, plane.leaves_earliest, plane.leaves_latest) == (None, None, None)
+    data = series(days, [500.0, 502.0, 504.0, 506.0, 540.0], ['a'] * 4 + ['b'])
+    data['permissible_I'] = np.array([1000.0] * 4 + [1200.0])
+    (plane,) = trends.fit_machine('m', data).planes
+    design = np.column_stack([days < 40, days == 40, days]).astype(float)
+    x, *_ = np.linalg.lstsq(design, data['amount_I'], rcond=None)
+    assert plane.now_fraction == pytest.approx((x[1] + 40.0 * x[2]) / 1200.0, rel=1e-12)
+
+
+def test_a_crossing_on_the_horizons_last_day_and_the_day_after():
+    """
+    A line from about 500 g mm rising 0.1 g mm/day reaches a share put 3649.5 days after
+    the last run on day 3650 (the horizon's last: said), one put 3650.5 days after on day
+    3651 (beyond: no date, no significant drift).
+    """
+    days = np.array([0.0, 10.0, 20.0, 30.0, 40.0])
+    amounts = 500.0 + 0.1 * days + np.array([0.001, -0.002, 0.0, 0.002, -0.001])
+    b, a = np.polyfit(days, amounts, 1)
+    for ahead, found in ((3649.5, 3650), (3650.5, None)):
+        limit = a + b * (40.0 + ahead)
+        (plane,) = trends.fit_machine('m', series(days, amounts, permissible=limit)).planes
+        if found is None:
+            assert plane.leaves is None and plane.status == STABLE
+        else:
+            assert plane.leaves == START + timedelta(days=40 + found)
+            assert plane.status == LEAVES
