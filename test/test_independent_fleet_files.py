@@ -523,3 +523,78 @@ def test_a_failure_row_by_hand():
     assert failure_row('d', Path('/x/b.mcap'), (1, 2), ('m', 'path'), 'why', 5_000) == {
         'digest': 'd', 'bag': '/x/b.mcap', 'bag_bytes': 1, 'bag_mtime_ns': 2,
         'machine_id': 'm', 'machine_source': 'path', 'reason': 'why', 'failed_at': 5_000}
+
+
+def test_the_median_bag_sets_the_batch():
+    """40 bags of 10 kB and 60 of 2 MiB: the median (index 50) is 2 MiB: 2 bags a task."""
+    sizes = [10_000] * 40 + [2 << 20] * 60
+    assert sorted(sizes)[50] == 2 << 20 and sorted(sizes)[33] == 10_000
+    assert engine.automatic_batch(sizes, 1) == 2
+    assert engine.automatic_batch(sizes[::-1], 1) == 2
+
+
+def test_a_run_on_dask_by_default():
+    """The documented default engine; the workers a LocalCluster gets: at most 2 here."""
+    import inspect
+    assert inspect.signature(engine.run_fleet).parameters['engine'].default == 'dask'
+    assert engine.ENGINES == ('dask', 'local')
+
+
+def test_a_retried_bag_that_now_succeeds_leaves_no_failure(tmp_path, monkeypatch):
+    """
+    A bag that failed (a read error this time) and is retried: analysed, its failure row
+    gone. A run with nothing failing writes an empty failures table beside the results.
+    """
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    shutil.copy(TILTED, runs / 'a.mcap')
+    out = tmp_path / 'fleet.parquet'
+    real = tasks.analyse_bag
+
+    def flaky(path):
+        raise OSError('disk went away')
+    monkeypatch.setattr(tasks, 'analyse_bag', flaky)
+    first = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert (first.analysed, first.failed, first.new_failures) == (
+        0, 1, [(str(runs / 'a.mcap'), 'disk went away')])
+    monkeypatch.setattr(tasks, 'analyse_bag', real)
+    again = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert (again.analysed, again.failed_before) == (0, 1)
+    retried = engine.run_fleet([runs], out, engine='local', progress=False,
+                               retry_failures=True)
+    assert (retried.analysed, retried.failed) == (1, 0)
+    assert pq.read_table(tmp_path / 'fleet.failures.parquet').num_rows == 0
+    assert pq.read_table(out).num_rows == 3
+    clean = tmp_path / 'clean'
+    clean.mkdir()
+    engine.run_fleet([runs], clean / 'f.parquet', engine='local', progress=False)
+    assert pq.read_table(clean / 'f.failures.parquet').num_rows == 0
+    assert pq.read_table(clean / 'f.parquet').num_rows == 3
+
+
+def test_a_bug_inside_a_run_is_raised_not_swallowed(tmp_path, monkeypatch):
+    (tmp_path / 'a.mcap').write_bytes(b'x')
+
+    def broken(items):
+        raise RuntimeError('a bug in the engine')
+    monkeypatch.setattr(engine, 'analyse_batch', broken)
+    with pytest.raises(RuntimeError, match='^a bug in the engine$'):
+        engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local', progress=False)
+
+
+def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys):
+    """On request: 'digest' and 'analyse', of n bags, cleared at the end; off: nothing."""
+    for name in ('a.mcap', 'b.mcap'):
+        (tmp_path / name).write_bytes(name.encode())
+    engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local', progress=True)
+    said = capsys.readouterr().err
+    for stage in ('digest', 'analyse'):
+        assert f'\r{stage}:   0%|          | 0/2 [00:00<?, ?bag/s]' in said, said
+    assert said.endswith('\r') and '\n' not in said
+    (tmp_path / 'c.mcap').write_bytes(b'c')
+    engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local', progress=False)
+    assert capsys.readouterr().err == ''
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    engine.run_fleet([empty], tmp_path / 'g.parquet', engine='local', progress=True)
+    assert capsys.readouterr().err == ''
