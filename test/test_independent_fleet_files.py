@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 import shutil
 import socket
+import sys
 
 import numpy as np
 import pyarrow as pa
@@ -582,7 +583,7 @@ def test_a_bug_inside_a_run_is_raised_not_swallowed(tmp_path, monkeypatch):
         engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local', progress=False)
 
 
-def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys):
+def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys, monkeypatch):
     """On request: 'digest' and 'analyse', of n bags, cleared at the end; off: nothing."""
     for name in ('a.mcap', 'b.mcap'):
         (tmp_path / name).write_bytes(name.encode())
@@ -598,3 +599,72 @@ def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys):
     empty.mkdir()
     engine.run_fleet([empty], tmp_path / 'g.parquet', engine='local', progress=True)
     assert capsys.readouterr().err == ''
+    # Not asked: shown on a terminal only.
+    (tmp_path / 'd.mcap').write_bytes(b'd')
+    monkeypatch.setattr(sys.stderr, 'isatty', lambda: True)
+    engine.run_fleet([tmp_path], tmp_path / 'f.parquet', engine='local')
+    assert 'digest:   0%|' in capsys.readouterr().err
+
+
+def test_a_stopped_run_keeps_what_it_wrote_at_its_checkpoints(tmp_path, monkeypatch):
+    """
+    Two bags, a task each, the second task stopped: with a checkpoint after every task the
+    first bag's rows are in the table; with none due, nothing is written. (A real bag is
+    analysed in each run: 0.3 s each here.)
+    """
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    shutil.copy(TILTED, runs / 'a.mcap')
+    (runs / 'b.mcap').write_bytes(b'b')
+    real = engine.analyse_batch
+
+    def stopped(items):
+        if items[0][4].endswith('b.mcap'):
+            raise RuntimeError('stopped')
+        return real(items)
+    monkeypatch.setattr(engine, 'analyse_batch', stopped)
+    for checkpoint, rows in ((0.0, 3), (1e9, None)):
+        out = tmp_path / f'{checkpoint}.parquet'
+        with pytest.raises(RuntimeError, match='^stopped$'):
+            engine.run_fleet([runs], out, engine='local', progress=False, batch=1,
+                             checkpoint=checkpoint)
+        if rows is None:
+            assert not out.exists()
+        else:
+            assert pq.read_table(out).num_rows == rows
+            assert pq.read_table(tmp_path / f'{checkpoint}.failures.parquet').num_rows == 0
+
+
+def test_a_runs_counts_and_times_over_several_bags(tmp_path):
+    """
+    Two good bags, an unreadable one first, three copies of one bad bag, seven more bad
+    bags: by hand. Samples: both good bags' accepted samples; 8 tasks of size 5 bytes on 1
+    worker: 2 bags a task; each stage's time within the run's.
+    """
+    import time
+    runs = tmp_path / 'runs'
+    runs.mkdir()
+    (runs / '0_broken.mcap').symlink_to(tmp_path / 'gone.mcap')
+    shutil.copy(TILTED, runs / 'a.mcap')
+    shutil.copy(ROOT / 'bags' / 'spin_up_tube_swap.mcap', runs / 'b.mcap')
+    for name in ('c1', 'c2', 'c3'):
+        (runs / f'{name}.mcap').write_bytes(b'same')
+    for k in range(7):
+        (runs / f'd{k}.mcap').write_bytes(f'bad {k}'.encode())
+    out = tmp_path / 'fleet.parquet'
+    started = time.perf_counter()
+    first = engine.run_fleet([runs], out, engine='local', progress=False)
+    took = time.perf_counter() - started
+    table = pq.read_table(out).to_pydict()
+    accepted = {bag: a for bag, a in zip(table['bag'], table['accepted'])}
+    assert (first.found, first.analysed, first.duplicates, first.failed) == (13, 2, 2, 9)
+    assert first.samples == accepted[str(runs / 'a.mcap')] + accepted[str(runs / 'b.mcap')]
+    assert first.batch == 2
+    assert 0 <= first.digest_seconds <= first.seconds <= took
+    assert 0 <= first.analysis_seconds <= first.seconds
+    failures = pq.read_table(tmp_path / 'fleet.failures.parquet').to_pylist()
+    (broken,) = [row for row in failures if row['digest'] is None]
+    now = time.time()
+    assert now - 60 < broken['failed_at'].timestamp() <= now
+    again = engine.run_fleet([runs], out, engine='local', progress=False)
+    assert (again.already, again.failed_before, again.duplicates) == (2, 10, 0)
