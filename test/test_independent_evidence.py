@@ -137,8 +137,8 @@ def test_when_the_layouts_verdict_stands_each_reason_in_its_words():
     assert (named.reason, named.coefficients) == ('no coefficients for this machine',
                                                   {'file': 'x.yaml'})
     empty = verdict_of_record(MODEL, estimate(DECLARED, identifiable=False, readings=0))
-    assert (empty.source, empty.reason, empty.measured_by) == (
-        'layout', 'no load-cell readings while this layout was in force', SENSORS)
+    assert (empty.level, empty.source, empty.reason, empty.measured_by) == (
+        'OK', 'layout', 'no load-cell readings while this layout was in force', SENSORS)
     few = verdict_of_record(MODEL, estimate(DECLARED, identifiable=False, readings=5))
     assert few.reason == (f'{SENSORS} cannot tell yet: too few readings or revolutions, or '
                           'no speed')
@@ -152,6 +152,7 @@ def test_when_the_layouts_verdict_stands_each_reason_in_its_words():
                      (evidence.LOAD_CELLS, "the load cells' 95 % interval")):
         wide = verdict_of_record(MODEL, estimate(DECLARED, variance, by=by))
         assert (wide.source, wide.level, wide.measured.level) == ('layout', 'OK', 'OK')
+        assert wide.measured_by == by and wide.layout.level == 'OK'
         assert wide.reason == (f'{said} is too wide yet (plane I: '
                                f'{0.3 * SHARES[0] * 1e6:.0f} g mm against its permissible '
                                f'{SHARES[0] * 1e6:.0f} g mm)')
@@ -163,8 +164,8 @@ def test_when_the_layouts_verdict_stands_each_reason_in_its_words():
                                     if k != 'service_speed'})
     model = RotorModel.from_layout(parse_layout(still))
     stopped = verdict_of_record(model, estimate(DECLARED))
-    assert (stopped.source, stopped.reason) == (
-        'layout', 'no service speed and the rotor has not turned')
+    assert (stopped.level, stopped.source, stopped.reason, stopped.measured_by) == (
+        'NOT JUDGED', 'layout', 'no service speed and the rotor has not turned', SENSORS)
     assert stopped.equivalent_grade is None and stopped.measured is not None
     record = stopped.record()
     assert (record['finest_grade_met'], record['within_grade'],
@@ -371,3 +372,45 @@ def test_parts_searched_in_layouts_of_up_to_2000_components():
     assert evidence.explain(more, residual_vectors(0j, 0.25)) == (
         'as if an unlisted 250 g at the correction radius 1 m were at 0 deg, z 0.500 m (or a '
         'part there heavier than the layout says)')
+
+
+def test_a_static_verdict_of_a_rotor_with_one_support_by_hand():
+    """
+    The bench rotor on one support (no planes): its static unbalance judged against
+    U_per = G m / Omega = 6.3e-3 x 11 / 10 kg m. Measured 0.51 kg m where it lists 0.5:
+    a static residual of 10000 g mm, beyond half of 6930; an interval of 3000 g mm (a
+    radius sqrt(chi2 (v + v)) of u_I + u_II) is too wide.
+    """
+    model = bench(planes=False)
+    per = 6.3e-3 * 11.0 / 10.0
+    measured = PlaneEstimate((-0.5, 0.5), (0j, 0.51 + 0j), ((1e-10, 0.0), (0.0, 1e-10)),
+                             SENSORS)
+    verdict = verdict_of_record(model, measured)
+    (static,) = verdict.disagreements
+    assert (static.plane, static.z) == ('static', None)
+    assert abs(static.residual - 0.01) < 1e-12
+    assert static.permissible == pytest.approx(per, rel=1e-12)
+    assert static.describe(brief=True) == 'static unbalance +10000 g mm at 0.0 deg'
+    assert verdict.level == 'ERROR' and verdict.source == 'measured'
+    assert verdict.equivalent_grade == pytest.approx(6.3 * 0.51 / per, rel=1e-9)
+    v = (0.003 ** 2) / CHI2 / 2
+    wide = verdict_of_record(model, PlaneEstimate((-0.5, 0.5), (0j, 0.51 + 0j),
+                                                  ((v, 0.0), (0.0, v)), SENSORS))
+    assert wide.reason == (f'the 95 % interval of {SENSORS} is too wide yet (static '
+                           f'unbalance: 3000 g mm against its permissible {per * 1e6:.0f} g '
+                           'mm)')
+    assert f'{per * 1e6:.0f}' == '6930'
+
+
+def test_an_unlisted_mass_of_exactly_1_kg_m_and_a_pure_couple():
+    """
+    (0.4, 0.6) kg m: one mass of 1 kg m (to the bit) at z = -0.5 + 0.6 m fits exactly.
+    A pure couple (0.1, -0.1): no single mass; A lighter leaves 0.1, over a quarter of
+    0.141: nothing offered.
+    """
+    model = bench()
+    assert 0.4 + 0.6 == 1.0
+    assert evidence.explain(model, residual_vectors(0.4 + 0j, 0.6 + 0j)) == (
+        'as if an unlisted 1000 g at the correction radius 1 m were at 0 deg, z 0.100 m (or '
+        'a part there heavier than the layout says)')
+    assert evidence.explain(model, residual_vectors(0.1 + 0j, -0.1 + 0j)) is None
