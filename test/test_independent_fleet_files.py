@@ -608,22 +608,23 @@ def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys, monkeypa
 
 def test_a_stopped_run_keeps_what_it_wrote_at_its_checkpoints(tmp_path, monkeypatch):
     """
-    Two bags, a task each, the second task stopped: with a checkpoint after every task the
-    first bag's rows are in the table; with none due, nothing is written. (A real bag is
-    analysed in each run: 0.3 s each here.)
+    Three bags, a task each, the third task stopped: with a checkpoint after every task the
+    first two bags' rows are in the tables; with none due (100 s), nothing is written. (A
+    real bag is analysed in each run: 0.3 s each here.)
     """
     runs = tmp_path / 'runs'
     runs.mkdir()
     shutil.copy(TILTED, runs / 'a.mcap')
     (runs / 'b.mcap').write_bytes(b'b')
+    (runs / 'c.mcap').write_bytes(b'c')
     real = engine.analyse_batch
 
     def stopped(items):
-        if items[0][4].endswith('b.mcap'):
+        if items[0][4].endswith('c.mcap'):
             raise RuntimeError('stopped')
         return real(items)
     monkeypatch.setattr(engine, 'analyse_batch', stopped)
-    for checkpoint, rows in ((0.0, 3), (1e9, None)):
+    for checkpoint, rows in ((0.0, 3), (100.0, None)):
         out = tmp_path / f'{checkpoint}.parquet'
         with pytest.raises(RuntimeError, match='^stopped$'):
             engine.run_fleet([runs], out, engine='local', progress=False, batch=1,
@@ -632,7 +633,8 @@ def test_a_stopped_run_keeps_what_it_wrote_at_its_checkpoints(tmp_path, monkeypa
             assert not out.exists()
         else:
             assert pq.read_table(out).num_rows == rows
-            assert pq.read_table(tmp_path / f'{checkpoint}.failures.parquet').num_rows == 0
+            failures = pq.read_table(tmp_path / f'{checkpoint}.failures.parquet')
+            assert failures.column('bag').to_pylist() == [str(runs / 'b.mcap')]
 
 
 def test_a_runs_counts_and_times_over_several_bags(tmp_path):
