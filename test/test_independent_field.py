@@ -102,3 +102,22 @@ def test_a_baseline_and_its_errors_given_as_columns_and_each_trial_on_alone():
         assert by_hand.checks[k].change == pytest.approx(change.max(), rel=1e-12)
     assert np.array_equal(trial_weights_on(trials, ('I', 'II')),
                           np.diag([trials[0].unbalance, trials[1].unbalance]))
+
+
+def test_a_trials_visibility_on_its_thresholds_by_hand():
+    """
+    By hand (no noise known): a change of exactly 10 % of the reading is seen. With noise:
+    sigmas 3 and 4 (5 in quadrature), changes of 25 and 100: exactly 5 standard errors is
+    weak but seen, exactly 20 neither weak nor too small.
+    """
+    one = [Trial('I', 0.1, 0.0, 1.0)]
+    seen = calibrate([10.0 + 0j, 10.0 + 0j], one, [[11.0 + 0j, 10.0 + 0j]])
+    (check,) = seen.checks
+    assert (check.relative, check.too_small, check.weak) == (0.1, False, False)
+    assert seen.warnings == ()
+    for change, weak in ((25.0, True), (100.0, False)):
+        noisy = calibrate([10.0 + 0j], one, [[10.0 + change]], baseline_sigma=[3.0],
+                          trial_sigmas=[[4.0]])
+        (check,) = noisy.checks
+        assert check.snr == change / 5.0
+        assert (check.too_small, check.weak) == (False, weak)
