@@ -33,6 +33,8 @@ def test_a_window_of_less_than_a_revolution_is_refused():
     live = SlidingFit(MODEL.supports, -9, window_revs=2.7)
     assert (live.window_revs, live.g_z, live.revolutions, live.dropped) == (2, -9.0, 0, 0)
     assert type(live.g_z) is float
+    assert SlidingFit(MODEL.supports, 0.0, window_revs=1).window_revs == 1
+    assert SlidingFit(MODEL.supports, 0.0).window_revs == 10          # the default
 
 
 def test_revolutions_are_counted_by_the_angle_turned_either_way():
