@@ -98,3 +98,32 @@ def test_a_two_mass_layouts_balance_and_its_couple_by_mass_by_hand():
     d_couple = 0.5 * -0.2 - (-0.2 - z_com) / 3.0 * s - z_com * 0.5
     assert np.allclose(found.couple[0], pairs(d_couple)[0], rtol=1e-12, atol=1e-16)
     assert np.allclose(found.products[0], [0.5 * -0.2, 0.0], rtol=1e-14, atol=1e-16)
+    # dC/dR_A = m_A (z_A - z_com) (its mass does not move: the centre of mass stays).
+    named = [(q.component, q.name) for q in found.parameters]
+    row = named.index(('A', 'radius'))
+    assert np.allclose(found.couple[row], [1.0 * (-0.2 - z_com), 0.0], rtol=1e-12, atol=1e-16)
+    assert np.isfinite(found.couple).all()
+
+
+def test_the_norms_slopes_and_the_judged_vectors_by_hand():
+    """
+    |v| along d: v.d / |v| either side ((3, 4), (1, 2): 11 / 5); at balance (|v| <= 8 eps
+    of the size, that bound included) a kink: -|d| below, +|d| above. Judged vectors: the
+    two planes', or the static unbalance alone without planes.
+    """
+    from cvc_balance.design.sensitivity import judged_vectors, norm_slopes
+    from cvc_balance.physics.layout import parse_layout
+    minus, plus = norm_slopes([[3.0, 4.0], [0.0, 0.0], [8 * np.finfo(float).eps, 0.0]],
+                              [[1.0, 2.0], [1.0, 2.0], [1.0, 2.0]], 1.0)
+    assert np.allclose(minus, [2.2, -np.sqrt(5.0), -np.sqrt(5.0)], rtol=1e-15)
+    assert np.allclose(plus, [2.2, np.sqrt(5.0), np.sqrt(5.0)], rtol=1e-15)
+    parts = [{'name': 'A', 'mass': 1.0, 'radius': 0.5, 'angle_deg': 0.0, 'z': 0.1}]
+    one = parse_layout({'name': 'one', 'components': parts, 'gravity': [0.0, 0.0, -9.8],
+                        'supports': [{'name': 'only', 'z': 0.0, 'axial': True}]})
+    got = judged_vectors(one, np.array([[0.5, 0.25]]), np.array([[0.05, 0.0]]))
+    assert got.shape == (1, 1, 2) and np.array_equal(got[0, 0], [0.5, 0.25])
+    two = parse_layout({'name': 'two', 'components': parts, 'gravity': [0.0, -9.8, 0.0],
+                        'supports': [{'name': 'a', 'z': -0.5},
+                                     {'name': 'b', 'z': 0.5, 'axial': True}]})
+    planes = judged_vectors(two, np.array([0.5, 0.0]), np.array([0.05, 0.0]))
+    assert np.allclose(planes, [[0.5 * 0.4, 0.0], [0.5 * 0.6, 0.0]], rtol=1e-14)
