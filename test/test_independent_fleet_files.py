@@ -511,7 +511,12 @@ def test_a_replay_record_flattened_to_rows_by_hand(tmp_path):
 
 
 def test_a_segment_without_samples_has_no_running_hours():
-    from cvc_balance.fleet.rows import bearing_columns
+    from cvc_balance.fleet.rows import bearing_columns, segment_columns
+    empty = segment_record(0)
+    empty.update({'from': None, 'first_sample': None, 'last_sample': None})
+    columns = segment_columns(0, empty)
+    assert (columns['layout_from'], columns['segment_start'], columns['segment_end'],
+            columns['running_hours']) == (None, None, None, None)
     segment = segment_record(0)
     segment.update(first_sample=None, last_sample=None)
     assert bearing_columns(segment)['running_hours'] is None
