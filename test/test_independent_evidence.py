@@ -59,7 +59,8 @@ def test_a_plane_estimate_reads_as_a_fit_does_by_hand():
 
 
 def test_a_rotor_not_what_its_layout_says_measured_by_the_sensors():
-    """Say that the rotor is not what its layout says, measured by the sensors.
+    """
+    Say that the rotor is not what its layout says, measured by the sensors.
 
     The measured rotor's grade, the plane II residual beyond its radius and half its share,
     level ERROR (out of grade), the unlisted mass found where it is: every word by hand.
@@ -231,7 +232,8 @@ def residual_of(planes):
 
 
 def test_explanations_by_hand_each_candidate():
-    """Explain each kind of candidate by hand.
+    """
+    Explain each kind of candidate by hand.
 
     A part heavier by a factor, missing, turned round; an unlisted mass between the planes;
     nothing (no residual, or one no candidate explains within a quarter): each by hand.
@@ -274,7 +276,8 @@ def test_explanations_by_hand_each_candidate():
 # -- explain's thresholds on a bench rotor where every candidate is worked out by hand -------
 
 def bench(extra=0, planes=True, radius=1.0, parts=True):
-    """Return a bench rotor whose candidates are worked out by hand.
+    """
+    Return a bench rotor whose candidates are worked out by hand.
 
     A hub on the axis (no moment: never a candidate) and part A, 1 kg at 0.5 m, 0 deg, z 0.5
     m: with planes at -+0.5 m its plane vectors are e = (0, 0.5) kg m. ``extra`` tiny parts
@@ -308,7 +311,8 @@ HEAVIER = 'as if A were +2 kg heavier (its 1 kg at 0.5 m, 0 deg)'
 
 
 def test_an_explanation_within_a_quarter_of_the_residual_or_its_radius_by_hand():
-    """Explain within a quarter of the residual or within its radius, not beyond.
+    """
+    Explain within a quarter of the residual or within its radius, not beyond.
 
     Residual (a i, 1): A heavier by the real projection 2 Re(v_II) (left |a|), an unlisted
     mass leaving sqrt 2 |m| |Im(v_II / m)|, m = 1 + a i (more). Offered when |a| <= a
@@ -328,7 +332,8 @@ def test_an_explanation_within_a_quarter_of_the_residual_or_its_radius_by_hand()
 
 
 def test_a_listed_part_only_when_it_fits_as_well_to_1e_9_of_the_residual():
-    """Prefer a listed part only when it fits as well, to 1e-9 of the residual.
+    """
+    Prefer a listed part only when it fits as well, to 1e-9 of the residual.
 
     Residual (1e-6, 1e-5) kg m: an unlisted mass fits exactly (both planes at 0 deg), A
     heavier leaves 1e-6, a tenth of it: the unlisted mass, 0.011 g at 1 m, z 0.409 m.
@@ -347,7 +352,8 @@ def test_a_listed_part_only_when_it_fits_as_well_to_1e_9_of_the_residual():
 
 
 def test_explanations_of_a_static_residual_and_without_a_correction_radius():
-    """Explain a static residual, and without a correction radius in g mm.
+    """
+    Explain a static residual, and without a correction radius in g mm.
 
     One support, no planes: the static residual 0.2 i kg m; A (moment 0.5) heavier leaves
     0.2, turned round leaves 0.04, an unlisted 200 g at 1 m, 90 deg fits exactly.
@@ -381,7 +387,8 @@ def test_parts_searched_in_layouts_of_up_to_2000_components():
 
 
 def test_a_static_verdict_of_a_rotor_with_one_support_by_hand():
-    """Judge a rotor on one support by its static unbalance, by hand.
+    """
+    Judge a rotor on one support by its static unbalance, by hand.
 
     The bench rotor on one support (no planes): its static unbalance judged against
     U_per = G m / Omega = 6.3e-3 x 11 / 10 kg m. Measured 0.51 kg m where it lists 0.5:
@@ -410,7 +417,8 @@ def test_a_static_verdict_of_a_rotor_with_one_support_by_hand():
 
 
 def test_an_unlisted_mass_of_exactly_1_kg_m_and_a_pure_couple():
-    """Explain an unlisted mass of exactly 1 kg m; nothing for a pure couple.
+    """
+    Explain an unlisted mass of exactly 1 kg m; nothing for a pure couple.
 
     (0.4, 0.6) kg m: one mass of 1 kg m (to the bit) at z = -0.5 + 0.6 m fits exactly.
     A pure couple (0.1, -0.1): no single mass; A lighter leaves 0.1, over a quarter of

@@ -39,7 +39,8 @@ def test_unbalance_limits_keep_the_problems_unit():
 
 
 def test_coefficients_that_give_no_correction_are_refused_in_these_words():
-    """Refuse coefficients that give no correction, in these words.
+    """
+    Refuse coefficients that give no correction, in these words.
 
     Fewer sensors than planes; a plane acting on no sensor (a zero singular value); the
     smallest singular value at 1e-10 of the largest (under the 1e-9 allowed): the words,
@@ -106,7 +107,8 @@ def test_a_baseline_and_its_errors_given_as_columns_and_each_trial_on_alone():
 
 
 def test_a_trials_visibility_on_its_thresholds_by_hand():
-    """Judge a trial's visibility exactly on its thresholds.
+    """
+    Judge a trial's visibility exactly on its thresholds.
 
     By hand (no noise known): a change of exactly 10 % of the reading is seen. With noise:
     sigmas 3 and 4 (5 in quadrature), changes of 25 and 100: exactly 5 standard errors is

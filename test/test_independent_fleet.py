@@ -376,7 +376,8 @@ def test_bags_found_once_in_name_order_hidden_folders_skipped(tmp_path):
 # -- the simulation's plan against its own description (simulate_fleet's docstrings) -----------
 
 def test_the_simulated_histories_are_those_described(fleet):
-    """Simulate the histories the description gives.
+    """
+    Simulate the histories the description gives.
 
     Each machine's kind by its number, its slip, swap, extra tube mass and as-built mass in
     their ranges; each run's date, path, declared and true layout, by hand from the layout.
@@ -434,7 +435,8 @@ def test_the_simulated_histories_are_those_described(fleet):
 
 
 def test_each_simulated_run_is_the_check_described(fleet):
-    """Simulate each run as the check described.
+    """
+    Simulate each run as the check described.
 
     A spin-up at 12 rad/s^2 to 23.27 rad/s, 3 s there, a coast-down: 2 x 23.27 / 12 + 3 s
     at 100 samples/s, 23.27^2 / 12 + 3 x 23.27 rad turned; two cells at 100 readings/s
@@ -483,7 +485,8 @@ def test_a_simulated_fleet_refuses_what_it_cannot_simulate(tmp_path):
 
 
 def test_a_layout_without_a_service_speed_or_planes_is_checked_at_23_27_rad_s(tmp_path):
-    """Check a layout without a service speed or planes at 23.27 rad/s.
+    """
+    Check a layout without a service speed or planes at 23.27 rad/s.
 
     The simulation's defaults by hand: 23.27 rad/s; the as-built mass between -0.12 and
     0.12 m; one run of one machine (20 samples/s, 0.2 s steady).

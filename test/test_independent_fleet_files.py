@@ -92,7 +92,8 @@ def test_a_bags_stat_key_is_its_size_and_newest_time(tmp_path):
 # -- discover ----------------------------------------------------------------------------------
 
 def test_bags_found_in_name_order_bag_folders_beside_files_links_and_staging_skipped(tmp_path):
-    """Find bags in name order; skip links to folders and staging folders.
+    """
+    Find bags in name order; skip links to folders and staging folders.
 
     By hand: one folder's bags (files and rosbag2 directories) in one name order, then
     its sub-folders in name order; a link to a folder, a staging folder not searched.
@@ -431,7 +432,8 @@ def segment_record(k, balance=True, identified=True, grade=True, source='measure
 
 
 def test_a_replay_record_flattened_to_rows_by_hand(tmp_path):
-    """Flatten a replay record to rows by hand.
+    """
+    Flatten a replay record to rows by hand.
 
     Run columns on each segment; a segment's numbers, planes, verdict, identification and
     bearings where the record has them, null where not; times to the microsecond.
@@ -549,7 +551,8 @@ def test_a_run_on_dask_by_default():
 
 
 def test_a_retried_bag_that_now_succeeds_leaves_no_failure(tmp_path, monkeypatch):
-    """Leave no failure row for a retried bag that now succeeds.
+    """
+    Leave no failure row for a retried bag that now succeeds.
 
     A bag that failed (a read error this time) and is retried: analysed, its failure row
     gone. A run with nothing failing writes an empty failures table beside the results.
@@ -615,7 +618,8 @@ def test_the_progress_bars_say_the_bags_of_each_stage(tmp_path, capsys, monkeypa
 
 
 def test_a_stopped_run_keeps_what_it_wrote_at_its_checkpoints(tmp_path, monkeypatch):
-    """Keep what a stopped run wrote at its checkpoints.
+    """
+    Keep what a stopped run wrote at its checkpoints.
 
     Three bags, a task each, the third task stopped: with a checkpoint after every task the
     first two bags' rows are in the tables; with none due (100 s), nothing is written. (A
@@ -647,7 +651,8 @@ def test_a_stopped_run_keeps_what_it_wrote_at_its_checkpoints(tmp_path, monkeypa
 
 
 def test_a_runs_counts_and_times_over_several_bags(tmp_path):
-    """Count a run's bags and time its stages, by hand.
+    """
+    Count a run's bags and time its stages, by hand.
 
     Two good bags, an unreadable one first, three copies of one bad bag, seven more bad
     bags: by hand. Samples: both good bags' accepted samples; 8 tasks of size 5 bytes on 1

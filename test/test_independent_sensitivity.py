@@ -63,7 +63,8 @@ def test_their_derivatives_by_complex_numbers_and_by_differences():
 
 
 def test_a_two_mass_layouts_balance_and_its_couple_by_mass_by_hand():
-    """Give a two-mass layout's balance and its couple's derivatives by hand.
+    """
+    Give a two-mass layout's balance and its couple's derivatives by hand.
 
     A: 1 kg at 0.5 m, 0 deg, z -0.2; B: 2 kg at 0.25 m, 90 deg, z 0.3; planes -+0.4 m,
     supports -+0.5 m, 10 rad/s. S = 0.5 + 0.5 i kg m, P = -0.1 + 0.15 i kg m^2, z_com =
@@ -107,7 +108,8 @@ def test_a_two_mass_layouts_balance_and_its_couple_by_mass_by_hand():
 
 
 def test_the_norms_slopes_and_the_judged_vectors_by_hand():
-    """Give the norm's slopes and the judged vectors by hand.
+    """
+    Give the norm's slopes and the judged vectors by hand.
 
     |v| along d: v.d / |v| either side ((3, 4), (1, 2): 11 / 5); at balance (|v| <= 8 eps
     of the size, that bound included) a kink: -|d| below, +|d| above. Judged vectors: the

@@ -301,7 +301,8 @@ def test_a_machines_summary_as_json_by_hand():
 
 
 def test_the_line_and_band_of_an_epoch_of_one_run_and_of_a_precise_fit():
-    """Fit the line and band of a one-run epoch and of a precise fit.
+    """
+    Fit the line and band of a one-run epoch and of a precise fit.
 
     Epochs a a a a b (b: the last run alone): the default epoch is b. A fit to 0.01 g mm:
     a band far under 1 g mm; each against numpy least squares, the band
@@ -353,7 +354,8 @@ def bearings(*uses):
 
 
 def test_bearing_life_read_from_the_table_each_run_once(tmp_path):
-    """Read bearing life from the table, each run once.
+    """
+    Read bearing life from the table, each run once.
 
     read_life: per machine and support the runs by time, the latest analysis of a run,
     not the runs without samples, a start or bearings; machine_trends carries them.
@@ -420,7 +422,8 @@ def test_a_tables_missing_values_read_as_nan_or_false_and_machines_ranked(tmp_pa
 
 
 def test_the_fewest_runs_fitted_and_runs_within_a_day():
-    """Fit the fewest runs, and runs within a day.
+    """
+    Fit the fewest runs, and runs within a day.
 
     Three runs of one layout (1 degree of freedom): fitted, the drift numpy's polyfit
     slope; runs hours apart (less than a day between first and last): fitted too.
@@ -444,7 +447,8 @@ def test_too_few_runs_are_judged_by_the_last_run_and_its_share():
 
 
 def test_a_plane_with_no_run_and_a_layout_of_one_run_between_two():
-    """Fit a plane never measured beside one that is, and a one-run layout.
+    """
+    Fit a plane never measured beside one that is, and a one-run layout.
 
     Plane I never measured: only plane II, its 95 % radii kept. Layouts a a a b c c c: the
     step b -> c is a_c - a_b (numpy least squares with a column per layout).
@@ -492,7 +496,8 @@ def test_masked_values_and_dates_by_hand():
 
 
 def test_a_stable_plane_is_not_projected_and_its_share_is_the_last_runs():
-    """Project nothing for a stable plane; judge by the last run's share.
+    """
+    Project nothing for a stable plane; judge by the last run's share.
 
     No significant drift: no date, no interval. A share changed at the last run (a new
     layout): the level over that share.
@@ -511,7 +516,8 @@ def test_a_stable_plane_is_not_projected_and_its_share_is_the_last_runs():
 
 
 def test_a_crossing_on_the_horizons_last_day_and_the_day_after():
-    """Find a crossing on the horizon's last day, not the day after.
+    """
+    Find a crossing on the horizon's last day, not the day after.
 
     A line from about 500 g mm rising 0.1 g mm/day reaches a share put 3649.5 days after
     the last run on day 3650 (the horizon's last: said), one put 3650.5 days after on day
