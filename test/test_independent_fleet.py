@@ -503,3 +503,93 @@ def test_a_layout_without_a_service_speed_or_planes_is_checked_at_23_27_rad_s(tm
     joints, cells, _ = messages(run.path)
     assert 23.27 <= max(w for _, w in joints) <= 23.27 + 5 * 0.005
     assert len(joints) == math.floor((2 * 23.27 / 12.0 + 0.2) * 20) + 1
+
+
+# -- the simulation's parts by themselves (pure: no bag written) ------------------------------
+
+def test_each_kind_of_machine_has_its_history_by_hand():
+    """
+    Check each machine's history as described, from the simulation's own parts.
+
+    Machine i's kind is KINDS[i % 4]; a slip (mm/day) in [0.005, 0.025) only for a slipping
+    counterweight (and both), a swap 0.35 to 0.65 of the span after the first run and a
+    tube 0.2 to 0.6 kg heavier than declared only with a tube swap (and both); the as-built
+    mass 20 to 100 g at 0.6 m between the planes; its id gantry-NNNN from 1.
+    """
+    from cvc_balance.fleet.simulate import _machine
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
+    rng = np.random.default_rng(3)
+    kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
+    for i in range(8):
+        plan = _machine(i, rng, first, 200.0, layout, 'counterweight_rear')
+        assert (plan.machine_id, plan.kind, plan.runs) == (f'gantry-{i + 1:04d}', kinds[i % 4],
+                                                           [])
+        if plan.kind in kinds[0:3:2]:
+            assert 0.005 <= plan.slip_mm_per_day < 0.025
+        else:
+            assert plan.slip_mm_per_day == 0.0
+        if plan.kind in kinds[1:3]:
+            assert 70.0 <= (plan.swap - first).total_seconds() / 86400 < 130.0
+            assert 0.2 <= plan.tube_extra_kg < 0.6
+        else:
+            assert (plan.swap, plan.tube_extra_kg) == (None, 0.0)
+        assert 0.02 <= plan.as_built['mass'] <= 0.1 and plan.as_built['radius'] == 0.6
+        assert -0.12 <= plan.as_built['z'] <= 0.12 and 0 <= plan.as_built['angle_deg'] <= 360
+    bare = dict(layout, balancing={})                      # no planes: -+0.12 m
+    for i in range(4):
+        assert -0.12 <= _machine(i, rng, first, 10.0, bare, 'x').as_built['z'] <= 0.12
+
+
+def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
+    """
+    Check the declared and true layouts before and after a swap, and a run's scenario.
+
+    Before the swap: declared as the layout; true with the as-built mass and the rear
+    counterweight 0.01 mm/day x 100 days further out. After: the tube 0.5 kg heavier and
+    0.5 kg opposite it declared; the true tube heavier by the extra too. The scenario: a
+    spin-up at 12 rad/s^2 to the speed, ``steady`` s there, a coast-down; the hidden
+    changes the layout does not declare; load cells at the rate asked, 15 N of noise and
+    biases of 100 (j + 1), -50 and 3 N.
+    """
+    from cvc_balance.fleet.simulate import _scenario, _state, MachinePlan
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, tzinfo=timezone.utc)
+    built = {'name': 'as_built', 'mass': 0.05, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.0}
+    plan = MachinePlan('m', 'both', 0.01, first + timedelta(days=50), 0.3, built)
+    by_name = {c['name']: c for c in layout['components']}
+    before, true = _state(layout, plan, first + timedelta(days=20), first,
+                          'counterweight_rear', 'xray_tube')
+    assert before == layout and before is not layout
+    true_parts = {c['name']: c for c in true['components']}
+    assert true_parts.pop('as_built') == built
+    assert true_parts['counterweight_rear']['radius'] == pytest.approx(0.66 + 0.01e-3 * 20,
+                                                                       abs=1e-15)
+    assert {k: v for k, v in true_parts.items() if k != 'counterweight_rear'} == \
+        {k: v for k, v in by_name.items() if k != 'counterweight_rear'}
+    after, true = _state(layout, plan, first + timedelta(days=100), first,
+                         'counterweight_rear', 'xray_tube')
+    declared = {c['name']: c for c in after['components']}
+    assert declared['xray_tube']['mass'] == 60.5
+    assert declared['tube_swap_correction'] == {'name': 'tube_swap_correction', 'mass': 0.5,
+                                                'radius': 0.62, 'angle_deg': 180.0, 'z': 0.05}
+    true_parts = {c['name']: c for c in true['components']}
+    assert true_parts['xray_tube']['mass'] == pytest.approx(60.8, abs=1e-12)
+    assert true_parts['counterweight_rear']['radius'] == pytest.approx(0.66 + 1e-3, abs=1e-15)
+    assert by_name['xray_tube']['mass'] == 60.0                # the layout itself untouched
+    when = first + timedelta(days=100)
+    spec = _scenario(plan, after, true, when, 50.0, 40.0, 20.0, 7, 2.5)
+    assert spec['profile'] == [{'type': 'spin_up', 'to': 20.0, 'alpha': 12.0},
+                               {'type': 'steady', 'duration': 2.5},
+                               {'type': 'coast_down', 'to': 0.0, 'alpha': -12.0}]
+    assert (spec['rate'], spec['seed'], spec['start'], spec['layout']) == (
+        50.0, 7, when.timestamp(), after)
+    assert (spec['name'], spec['joint_name']) == (f'm {when.isoformat()}', 'gantry_joint')
+    assert spec['noise'] == {'angle': 1.0e-4, 'speed': 0.005}
+    assert spec['load_cells'] == {'rate': 40.0, 'noise': 15.0,
+                                  'bias': {'front': [100.0, -50.0, 3.0],
+                                           'rear': [200.0, -50.0, 3.0]}}
+    hidden = spec['hidden']
+    assert hidden[0] == {'at': 0.0, 'add': built}
+    assert sorted((h['set']['component'], sorted(h['set'])) for h in hidden[1:]) == [
+        ('counterweight_rear', ['component', 'radius']), ('xray_tube', ['component', 'mass'])]
