@@ -89,6 +89,7 @@ def test_a_machines_chart_draws_its_runs_share_fit_projection_and_change(tmp_pat
     assert trend.leaves == day(grid[leaves])                  # the premise, by hand
     figure = machine_chart(trend, tmp_path / chart_name(trend.machine_id))
     assert chart_name('site/m 1') == 'site_m_1.png'
+    assert chart_name('Gantry-7@Site+B.x') == 'Gantry-7@Site+B.x.png'
     assert (tmp_path / 'site_m_1.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     assert figure._suptitle.get_text() == (
         f'site/m 1: LEAVES GRADE {day(grid[leaves]):%Y-%m-%d}   (layout gantry b, G 6.3, '
@@ -197,7 +198,7 @@ def test_the_fleet_chart_ranks_the_machines_to_their_dates(tmp_path):
                      f' {day(grid[leaves]):%Y-%m-%d} (plane I)', ' NO SIGNIFICANT DRIFT']
     (interval,) = [ln for ln in ax.get_lines() if len(ln.get_xdata()) == 2]
     assert np.allclose(interval.get_xdata(), [grid[earliest] - DAYS[-1],
-                                              grid[latest] - DAYS[-1]], atol=1e-9)
+                                              grid[latest] - DAYS[-1]], rtol=0, atol=1e-6)
     assert list(interval.get_ydata()) == [1, 1]
     # At most ``most`` machines.
     two = _last_figure(tmp_path / 'two.png', [out, leaving, calm], most=2)
@@ -234,5 +235,19 @@ def test_the_fleet_chart_of_a_date_with_no_latest_end(tmp_path):
     assert interval.get_xdata()[1] == pytest.approx(2 * days, rel=1e-12)
     figure = machine_chart(trend, tmp_path / 'm.png')
     (span,) = figure.axes[0].patches
-    assert abs(span.get_x() + span.get_width()
-               - date2num(plane.leaves + timedelta(days=30))) < 1e-9
+    end = plane.leaves + timedelta(days=30)
+    assert abs(span.get_x() + span.get_width() - date2num(end)) < 1e-9
+    # The chart runs to 30 days past the date: the share's step and the projection.
+    lines = {ln.get_label(): ln for ln in figure.axes[0].get_lines()}
+    assert abs(to_days(lines['permissible (G 6.3)'].get_xdata()[-1])
+               - (end - START).total_seconds() / 86400) < 1e-9
+    # Two planes: a panel each; a machine without a plane: a row that says so.
+    data = series()
+    data['amount_II'], data['permissible_II'] = AMOUNTS / 2, SHARE
+    data['ci95_II'], data['identified_II'] = CI95, MEASURED
+    both = fit_machine('both', data)
+    assert [p.plane for p in both.planes] == ['I', 'II']
+    assert len(machine_chart(both, tmp_path / 'b.png').axes) == 2
+    empty = fit_machine('none', series(np.full(len(DAYS), np.nan)))
+    figure = _last_figure(tmp_path / 'e.png', [empty])
+    assert [t.get_text() for t in figure.axes[0].texts] == [' TOO FEW RUNS']
