@@ -14,6 +14,7 @@ from pathlib import Path
 import shutil
 import socket
 import sys
+import time
 
 import numpy as np
 import pyarrow as pa
@@ -152,6 +153,23 @@ def test_what_is_not_read_as_a_bag_and_why_in_the_words_said(tmp_path):
         'a.mcap/x': 'cannot read: Not a directory'}
 
 
+def test_a_bag_that_cannot_be_read_or_is_of_no_known_kind_is_said(tmp_path, monkeypatch):
+    """Say a read error by its reason, else its text; a file of no known kind as special."""
+    bag = tmp_path / 'a.mcap'
+    bag.write_bytes(b'x')
+    for error, said in ((OSError(13, 'Permission denied'), 'Permission denied'),
+                        (OSError('no reason given'), 'no reason given')):
+        def unreadable(path, error=error):
+            raise error
+        monkeypatch.setattr(tasks, 'content_digest', unreadable)
+        assert tasks.identify_bag_file(bag) == (str(bag), None, f'cannot read: {said}')
+
+    class Odd:
+        st_mode = 0o160000                      # a whiteout: none of the kinds named
+    monkeypatch.setattr(tasks.os, 'stat', lambda path: Odd())
+    assert tasks.not_a_bag_file(bag) == 'not a regular file (a special file): not read'
+
+
 def test_a_task_identifies_bags_by_hand_and_names_what_it_cannot_read(tmp_path):
     """(path, (size, mtime ns), sha256) by os.stat and hashlib; (path, None, why) else."""
     bag = tmp_path / 'a.mcap'
@@ -171,7 +189,7 @@ def test_a_bag_that_fails_gives_one_failure_row_with_its_reason(tmp_path, monkey
     bag.write_bytes(b'xyz')
     status, row = tasks.analyse(str(bag), str(tmp_path), 'd1', (3, 44))
     assert status == 'failed'
-    assert row['failed_at'] % 1000 == 0 and row['failed_at'] > 1.7e18
+    assert row['failed_at'] % 1000 == 0 and abs(row['failed_at'] / 1e9 - time.time()) < 60
     assert dict(row, failed_at=0) == {
         'digest': 'd1', 'bag': str(bag), 'bag_bytes': 3, 'bag_mtime_ns': 44,
         'machine_id': 'site/gantry_7', 'machine_source': 'path',
@@ -192,7 +210,11 @@ def test_a_bag_that_fails_gives_one_failure_row_with_its_reason(tmp_path, monkey
     assert tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]['reason'] == \
         'y' * 500 + '... (600 characters)'
     monkeypatch.setattr(tasks, 'analyse_bag', lambda path: {'segments': []})
-    assert tasks.analyse(str(bag), str(runs), 'd', (3, 4))[1]['reason'] == 'no layout segment'
+    status, row = tasks.analyse(str(bag), str(runs), 'd', (3, 4), 'label')
+    assert abs(row.pop('failed_at') / 1e9 - time.time()) < 60
+    assert (status, row) == ('failed', {
+        'digest': 'd', 'bag': 'label', 'bag_bytes': 3, 'bag_mtime_ns': 4, 'machine_id': 'r',
+        'machine_source': 'path', 'reason': 'no layout segment'})
 
     def unreadable(path, root):
         raise PermissionError('no')
@@ -658,7 +680,6 @@ def test_a_runs_counts_and_times_over_several_bags(tmp_path):
     bags: by hand. Samples: both good bags' accepted samples; 8 tasks of size 5 bytes on 1
     worker: 2 bags a task; each stage's time within the run's.
     """
-    import time
     runs = tmp_path / 'runs'
     runs.mkdir()
     (runs / '0_broken.mcap').symlink_to(tmp_path / 'gone.mcap')
@@ -679,6 +700,9 @@ def test_a_runs_counts_and_times_over_several_bags(tmp_path):
     assert first.batch == 2
     assert 0 <= first.digest_seconds <= first.seconds <= took
     assert 0 <= first.analysis_seconds <= first.seconds
+    for seconds, at in zip(table['analysis_seconds'], table['analysed_at']):
+        assert 0 < seconds <= first.analysis_seconds
+        assert abs(at.timestamp() - time.time()) < 60
     failures = pq.read_table(tmp_path / 'fleet.failures.parquet').to_pylist()
     (broken,) = [row for row in failures if row['digest'] is None]
     now = time.time()
