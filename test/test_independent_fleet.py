@@ -13,6 +13,7 @@ counts, times and speeds against the bag's messages read by rosbags.
 """
 
 import cmath
+from datetime import datetime, timedelta, timezone
 import math
 from pathlib import Path
 
@@ -370,3 +371,225 @@ def test_bags_found_once_in_name_order_hidden_folders_skipped(tmp_path):
     with pytest.raises(FileNotFoundError) as caught:
         find_bags([runs, tmp_path / 'nowhere'])
     assert str(caught.value) == f'{tmp_path / "nowhere"}: no such file or directory'
+
+
+# -- the simulation's plan against its own description (simulate_fleet's docstrings) -----------
+
+def test_the_simulated_histories_are_those_described(fleet):
+    """
+    Simulate the histories the description gives.
+
+    Each machine's kind by its number, its slip, swap, extra tube mass and as-built mass in
+    their ranges; each run's date, path, declared and true layout, by hand from the layout.
+    """
+    plans, _, _ = fleet
+    layout = yaml.safe_load(LAYOUT.read_text())
+    by_name = {c['name']: c for c in layout['components']}
+    first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
+    kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
+    assert [p.machine_id for p in plans] == [f'gantry-000{i}' for i in range(1, MACHINES + 1)]
+    assert [p.kind for p in plans] == [kinds[i % 4] for i in range(MACHINES)]
+    for i, plan in enumerate(plans):
+        slips, swaps = plan.kind in kinds[0:3:2], plan.kind in kinds[1:3]
+        assert (0.005 <= plan.slip_mm_per_day < 0.025) if slips else plan.slip_mm_per_day == 0
+        if swaps:
+            assert 0.35 * 120 <= (plan.swap - first).total_seconds() / 86400 < 0.65 * 120
+            assert 0.2 <= plan.tube_extra_kg < 0.6
+        else:
+            assert (plan.swap, plan.tube_extra_kg) == (None, 0.0)
+        built = plan.as_built
+        assert sorted(built) == ['angle_deg', 'mass', 'name', 'radius', 'z']
+        assert (built['name'], built['radius']) == ('as_built', 0.6)
+        assert 0.02 <= built['mass'] <= 0.1 and round(built['mass'], 4) == built['mass']
+        assert 0 <= built['angle_deg'] <= 360 and -0.12 <= built['z'] <= 0.12
+        assert len(plan.runs) == RUNS
+        for k, run in enumerate(plan.runs):
+            minutes = (run.when - first - timedelta(days=40 * k)).total_seconds() / 60
+            assert 7 * i <= minutes < 7 * i + 90, (i, k, minutes)
+            name = run.when.strftime('%Y-%m-%dT%H%M%S')
+            assert run.path.parent.name == plan.machine_id
+            assert run.path.name == (name if k == 2 else f'{name}.mcap')
+            assert run.path.is_dir() == (k == 2)
+            swapped = swaps and run.when >= plan.swap
+            declared = {c['name']: c for c in run.declared['components']}
+            want = dict(by_name)
+            if swapped:
+                tube = by_name['xray_tube']
+                want['xray_tube'] = dict(tube, mass=tube['mass'] + 0.5)
+                want['tube_swap_correction'] = {
+                    'name': 'tube_swap_correction', 'mass': 0.5, 'radius': tube['radius'],
+                    'angle_deg': tube['angle_deg'] + 180.0, 'z': tube['z']}
+            assert declared == want
+            assert {k: v for k, v in run.declared.items() if k != 'components'} == \
+                {k: v for k, v in layout.items() if k != 'components'}
+            true = {c['name']: c for c in run.true_components}
+            assert true.pop('as_built') == built
+            elapsed = (run.when - first).total_seconds() / 86400
+            slipped = want['counterweight_rear']['radius'] + plan.slip_mm_per_day * 1e-3 * elapsed
+            assert abs(true['counterweight_rear'].pop('radius') - slipped) <= 1e-15
+            heavier = want['xray_tube']['mass'] + (plan.tube_extra_kg if swapped else 0.0)
+            assert abs(true['xray_tube'].pop('mass') - heavier) <= 1e-13
+            for name, moved in (('counterweight_rear', 'radius'), ('xray_tube', 'mass')):
+                want[name] = {k: v for k, v in want[name].items() if k != moved}
+            assert true == want
+
+
+def test_each_simulated_run_is_the_check_described(fleet):
+    """
+    Simulate each run as the check described.
+
+    A spin-up at 12 rad/s^2 to 23.27 rad/s, 3 s there, a coast-down: 2 x 23.27 / 12 + 3 s
+    at 100 samples/s, 23.27^2 / 12 + 3 x 23.27 rad turned; two cells at 100 readings/s
+    with 15 N of noise on each axis (the fit's rms 15 sqrt 2 N).
+    """
+    plans, _, rows = fleet
+    seconds = 2 * 23.27 / 12.0 + 3.0
+    turns = (23.27 ** 2 / 12.0 + 3.0 * 23.27) / (2 * math.pi)
+    rms = []
+    for plan in plans:
+        for run in plan.runs:
+            row = rows[str(run.path)]
+            assert row['samples'] == math.floor(seconds * 100) + 1
+            assert abs((row['run_end'] - row['run_start']).total_seconds()
+                       - math.floor(seconds * 100) / 100) < 1e-6
+            assert abs(row['identified_readings'] - 2 * row['samples']) <= 2
+            assert abs(row['identified_revolutions'] - turns) < 0.01
+            assert 23.27 <= row['top_speed'] <= 23.27 + 5 * 0.005
+            rms.append(row['fit_rms_N'])
+    assert abs(np.mean(rms) - 15 * math.sqrt(2)) < 0.03 * 15 * math.sqrt(2), np.mean(rms)
+
+
+def test_a_simulated_fleet_refuses_what_it_cannot_simulate(tmp_path):
+    """No components, no counterweight or tube of the names given, no machines: the words."""
+    (tmp_path / 'list.yaml').write_text('- 1\n')
+    (tmp_path / 'bare.yaml').write_text(yaml.safe_dump({'components': [
+        {'name': 'xray_tube', 'mass': 1.0, 'radius': 0.1}]}))
+    for layout, options, says in (
+            ('list.yaml', {}, f'{tmp_path / "list.yaml"}: not a layout (a mapping with a list '
+                              'of components)'),
+            ('bare.yaml', {}, f"{tmp_path / 'bare.yaml'}: no component 'counterweight_rear' "
+                              '(the simulated fleet moves a counterweight and swaps a tube)'),
+            ('bare.yaml', {'counterweight': 'xray_tube', 'tube': 'anode'},
+             f"{tmp_path / 'bare.yaml'}: no component 'anode' (the simulated fleet moves a "
+             'counterweight and swaps a tube)')):
+        with pytest.raises(ValueError) as caught:
+            simulate_fleet(tmp_path / layout, tmp_path / 'runs', **options)
+        assert str(caught.value) == says
+    for options in ({'machines': 0}, {'runs': 0}, {'days': 0.0}, {'steady': 0.0},
+                    {'days': math.nan}):
+        with pytest.raises(ValueError) as caught:
+            simulate_fleet(LAYOUT, tmp_path / 'runs', **options)
+        assert str(caught.value) == ('a fleet needs machines >= 1, runs >= 1, days > 0 and '
+                                     'steady > 0')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bare.yaml', 'list.yaml']
+
+
+def test_a_layout_without_a_service_speed_or_planes_is_checked_at_23_27_rad_s(tmp_path):
+    """
+    Check a layout without a service speed or planes at 23.27 rad/s.
+
+    The simulation's defaults by hand: 23.27 rad/s; the as-built mass between -0.12 and
+    0.12 m; one run of one machine (20 samples/s, 0.2 s steady).
+    """
+    layout = yaml.safe_load(LAYOUT.read_text())
+    del layout['balancing']
+    (tmp_path / 'plain.yaml').write_text(yaml.safe_dump(layout))
+    (plan,) = simulate_fleet(tmp_path / 'plain.yaml', tmp_path / 'runs', machines=1, runs=1,
+                             rate=20.0, cell_rate=20.0, steady=0.2, seed=5)
+    assert -0.12 <= plan.as_built['z'] <= 0.12 and plan.kind == 'slipping counterweight'
+    (run,) = plan.runs
+    assert run.path == tmp_path / 'runs' / 'gantry-0001' / \
+        f'{run.when.strftime("%Y-%m-%dT%H%M%S")}.mcap'
+    joints, cells, _ = messages(run.path)
+    assert 23.27 <= max(w for _, w in joints) <= 23.27 + 5 * 0.005
+    assert len(joints) == math.floor((2 * 23.27 / 12.0 + 0.2) * 20) + 1
+
+
+# -- the simulation's parts by themselves (pure: no bag written) ------------------------------
+
+def test_each_kind_of_machine_has_its_history_by_hand():
+    """
+    Check each machine's history as described, from the simulation's own parts.
+
+    Machine i's kind is KINDS[i % 4]; a slip (mm/day) in [0.005, 0.025) only for a slipping
+    counterweight (and both), a swap 0.35 to 0.65 of the span after the first run and a
+    tube 0.2 to 0.6 kg heavier than declared only with a tube swap (and both); the as-built
+    mass 20 to 100 g at 0.6 m between the planes; its id gantry-NNNN from 1.
+    """
+    from cvc_balance.fleet.simulate import _machine
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
+    rng = np.random.default_rng(3)
+    kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
+    for i in range(8):
+        plan = _machine(i, rng, first, 200.0, layout, 'counterweight_rear')
+        assert (plan.machine_id, plan.kind, plan.runs) == (f'gantry-{i + 1:04d}', kinds[i % 4],
+                                                           [])
+        if plan.kind in kinds[0:3:2]:
+            assert 0.005 <= plan.slip_mm_per_day < 0.025
+        else:
+            assert plan.slip_mm_per_day == 0.0
+        if plan.kind in kinds[1:3]:
+            assert 70.0 <= (plan.swap - first).total_seconds() / 86400 < 130.0
+            assert 0.2 <= plan.tube_extra_kg < 0.6
+        else:
+            assert (plan.swap, plan.tube_extra_kg) == (None, 0.0)
+        assert 0.02 <= plan.as_built['mass'] <= 0.1 and plan.as_built['radius'] == 0.6
+        assert -0.12 <= plan.as_built['z'] <= 0.12 and 0 <= plan.as_built['angle_deg'] <= 360
+    bare = dict(layout, balancing={})                      # no planes: -+0.12 m
+    for i in range(4):
+        assert -0.12 <= _machine(i, rng, first, 10.0, bare, 'x').as_built['z'] <= 0.12
+
+
+def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
+    """
+    Check the declared and true layouts before and after a swap, and a run's scenario.
+
+    Before the swap: declared as the layout; true with the as-built mass and the rear
+    counterweight 0.01 mm/day x 100 days further out. After: the tube 0.5 kg heavier and
+    0.5 kg opposite it declared; the true tube heavier by the extra too. The scenario: a
+    spin-up at 12 rad/s^2 to the speed, ``steady`` s there, a coast-down; the hidden
+    changes the layout does not declare; load cells at the rate asked, 15 N of noise and
+    biases of 100 (j + 1), -50 and 3 N.
+    """
+    from cvc_balance.fleet.simulate import _scenario, _state, MachinePlan
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, tzinfo=timezone.utc)
+    built = {'name': 'as_built', 'mass': 0.05, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.0}
+    plan = MachinePlan('m', 'both', 0.01, first + timedelta(days=50), 0.3, built)
+    by_name = {c['name']: c for c in layout['components']}
+    before, true = _state(layout, plan, first + timedelta(days=20), first,
+                          'counterweight_rear', 'xray_tube')
+    assert before == layout and before is not layout
+    true_parts = {c['name']: c for c in true['components']}
+    assert true_parts.pop('as_built') == built
+    assert true_parts['counterweight_rear']['radius'] == pytest.approx(0.66 + 0.01e-3 * 20,
+                                                                       abs=1e-15)
+    assert {k: v for k, v in true_parts.items() if k != 'counterweight_rear'} == \
+        {k: v for k, v in by_name.items() if k != 'counterweight_rear'}
+    after, true = _state(layout, plan, first + timedelta(days=100), first,
+                         'counterweight_rear', 'xray_tube')
+    declared = {c['name']: c for c in after['components']}
+    assert declared['xray_tube']['mass'] == 60.5
+    assert declared['tube_swap_correction'] == {'name': 'tube_swap_correction', 'mass': 0.5,
+                                                'radius': 0.62, 'angle_deg': 180.0, 'z': 0.05}
+    true_parts = {c['name']: c for c in true['components']}
+    assert true_parts['xray_tube']['mass'] == pytest.approx(60.8, abs=1e-12)
+    assert true_parts['counterweight_rear']['radius'] == pytest.approx(0.66 + 1e-3, abs=1e-15)
+    assert by_name['xray_tube']['mass'] == 60.0                # the layout itself untouched
+    when = first + timedelta(days=100)
+    spec = _scenario(plan, after, true, when, 50.0, 40.0, 20.0, 7, 2.5)
+    assert spec['profile'] == [{'type': 'spin_up', 'to': 20.0, 'alpha': 12.0},
+                               {'type': 'steady', 'duration': 2.5},
+                               {'type': 'coast_down', 'to': 0.0, 'alpha': -12.0}]
+    assert (spec['rate'], spec['seed'], spec['start'], spec['layout']) == (
+        50.0, 7, when.timestamp(), after)
+    assert (spec['name'], spec['joint_name']) == (f'm {when.isoformat()}', 'gantry_joint')
+    assert spec['noise'] == {'angle': 1.0e-4, 'speed': 0.005}
+    assert spec['load_cells'] == {'rate': 40.0, 'noise': 15.0,
+                                  'bias': {'front': [100.0, -50.0, 3.0],
+                                           'rear': [200.0, -50.0, 3.0]}}
+    hidden = spec['hidden']
+    assert hidden[0] == {'at': 0.0, 'add': built}
+    assert sorted((h['set']['component'], sorted(h['set'])) for h in hidden[1:]) == [
+        ('counterweight_rear', ['component', 'radius']), ('xray_tube', ['component', 'mass'])]

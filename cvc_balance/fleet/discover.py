@@ -54,9 +54,8 @@ def find_bags(paths):
                           not f.endswith(STAGING_SUFFIX)]
             bags = sorted(f for f in folders if is_bag_directory(here / f))
             folders[:] = sorted(f for f in folders if f not in bags)
-            entries = sorted([(name, True) for name in bags]
-                             + [(name, False) for name in files
-                                if not name.startswith('.') and name.endswith(BAG_SUFFIXES)])
-            for name, _ in entries:
+            # One name order: a folder and a file of one folder never share a name.
+            for name in sorted(bags + [name for name in files if not name.startswith('.')
+                                       and name.endswith(BAG_SUFFIXES)]):
                 add(here / name, root)
     return found

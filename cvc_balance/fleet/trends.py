@@ -191,13 +191,15 @@ def read_series(results, machine=None):
 
 
 def _filled(values):
-    """Return a masked array's values, nan (numbers) or False (flags) where masked."""
+    """Return a masked array's values, nan (numbers), False (flags), None (text) where masked."""
     if isinstance(values, np.ma.MaskedArray):
         if values.dtype.kind == 'f':
             return values.filled(np.nan)
         if values.dtype.kind == 'b':
             return values.filled(False)
-        return values.filled(None) if values.dtype.kind == 'O' else values.data
+        if values.dtype.kind == 'O':      # filled(None) would fill with numpy's default, '?'
+            return np.where(np.ma.getmaskarray(values), None, values.data)
+        return values.data
     return values
 
 
