@@ -623,6 +623,8 @@ def test_a_file_cut_anywhere_says_where_and_keeps_what_came_before(tmp_path):
 @pytest.mark.parametrize('data_end', ['whole', 'flipped'])
 def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(data_end, tmp_path):
     """
+    Records the walk cannot take are found by the summarys indexes.
+
     Two chunks' opcodes flipped to a message's and a metadata record's to a kind no reader
     knows (and the data end's: the summary then found by the footer, the walk having
     missed it): the summary gives the chunks and the metadata record where they are.
@@ -669,6 +671,8 @@ def test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes(data_end
 
 def test_a_damaged_summary_record_stops_the_walk_there(tmp_path):
     """
+    A damaged summary record stops the walk there.
+
     A Channel of the summary whose topic runs past it: said; every message read (as the
     mcap library's stream reader reads the data section).
     """
@@ -687,6 +691,8 @@ def test_a_damaged_summary_record_stops_the_walk_there(tmp_path):
 
 def test_two_messages_a_chunk_lists_in_reverse(tmp_path):
     """
+    Two messages a chunk lists in reverse.
+
     A chunk's message index listing its two messages in reverse (by log time, as some
     writers sort it): both read, as the mcap library's stream reader reads them.
     """
@@ -707,6 +713,8 @@ def test_two_messages_a_chunk_lists_in_reverse(tmp_path):
     ('compression', "unknown compression 'zstx'"), ('no crc', None)])
 def test_a_chunk_that_does_not_decode_costs_only_itself(damage, said, tmp_path):
     """
+    A chunk that does not decode costs only itself.
+
     A chunk's CRC, uncompressed size or compression damaged: its messages are lost, said
     once; the others are read (as the mcap library reads them from the file without that
     chunk). A CRC of 0 means none was computed: the chunk is read.
@@ -741,6 +749,8 @@ def test_a_chunk_that_does_not_decode_costs_only_itself(damage, said, tmp_path):
 
 def test_a_message_index_that_points_elsewhere_walks_its_chunk(tmp_path):
     """
+    A message index that points elsewhere walks its chunk.
+
     An entry of a chunk's message index moved by one byte: said, the chunk walked, every
     message read (as the mcap library's stream reader, which needs no index, reads them).
     """
@@ -761,6 +771,8 @@ def test_a_message_index_that_points_elsewhere_walks_its_chunk(tmp_path):
 
 def joint_rows_by_rosbags(path, joint='gantry_joint', skip=None):
     """
+    Return the JointStates rows as rosbags reads them.
+
     ((stamp, log time, angle, speed) of each JointState rosbags decodes, by log time;
     how many it cannot decode), from the mcap library's reading of /joint_states; those
     naming ``skip`` left out.
@@ -787,7 +799,7 @@ def joint_rows_by_rosbags(path, joint='gantry_joint', skip=None):
 @pytest.mark.parametrize('strided', [True, False], ids=['strided', 'gathered'])
 def test_joint_states_of_one_length_and_other_layouts_are_told_apart(strided, tmp_path):
     """
-    JointStates of one length (104 bytes) whose joint is elsewhere, and unreadable ones.
+    Read JointStates of one length (104 bytes) whose joint is elsewhere, and unreadable ones.
 
     Kinds in a seeded random order: the joint first or second of two names, and two
     positions and speeds; one position and three speeds; three positions and one speed;
@@ -849,6 +861,8 @@ def test_joint_states_of_one_length_and_other_layouts_are_told_apart(strided, tm
 
 def test_more_publishers_in_a_chunk_than_are_gathered_at_once(tmp_path):
     """
+    More publishers in a chunk than are gathered at once.
+
     Twenty publishers (frames of 0 to 19 letters) on one topic in one chunk: the first 16
     layouts gathered at once, the others message by message; every row as rosbags decodes
     it, the one unreadable message counted.
@@ -876,7 +890,7 @@ def test_more_publishers_in_a_chunk_than_are_gathered_at_once(tmp_path):
 
 
 def built(*records):
-    """The bytes of ``records`` (the mcap library's record classes), one after the other."""
+    """Return the bytes of ``records`` (the mcap library's record classes), one after the other."""
     from mcap.data_stream import RecordBuilder
     out = b''
     for record in records:
@@ -887,7 +901,7 @@ def built(*records):
 
 
 def string_record(channel, log_time, text):
-    """A Message record (the mcap library's) of a std_msgs/String serialised by rosbags."""
+    """Return a Message record (the mcap library's) of a std_msgs/String serialised by rosbags."""
     from mcap.records import Message
     return Message(channel_id=channel, sequence=0, log_time=log_time, publish_time=log_time,
                    data=TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data=text),
@@ -897,6 +911,8 @@ def string_record(channel, log_time, text):
 def hand_built_file(chunks, loose_before=(), loose_after=(), compress=None, crc=True,
                     indexes=True, summary=False):
     """
+    Return a recording built record by record.
+
     A recording built record by record (the mcap library's records): Header, Schema,
     Channels 1 (/n) and 2 (/m), loose messages, chunks of messages ({id: [(time, text)]}
     each; compressed by ``compress`` (name, function) if given, their CRC or 0, with
@@ -943,6 +959,8 @@ MAGIC = b'\x89MCAP0\r\n'
 
 def test_messages_outside_chunks_come_in_file_order(tmp_path):
     """
+    Messages outside chunks come in file order.
+
     Loose messages before, between (none) and after chunks, and chunks without a message
     of one channel: every channel's messages in file order, as the mcap library's stream
     reader reads them, with and without message indexes (and then with the channels in
@@ -965,6 +983,8 @@ def test_messages_outside_chunks_come_in_file_order(tmp_path):
 
 def test_a_zstd_chunk_without_its_content_size_and_a_chunk_without_a_crc(tmp_path):
     """
+    A zstd chunk without its content size and a chunk without a crc.
+
     A zstd frame that does not state its size (the chunk record does) and a chunk whose
     CRC is 0 (none computed): both read, as the mcap library reads them.
     """
@@ -982,6 +1002,8 @@ def test_a_zstd_chunk_without_its_content_size_and_a_chunk_without_a_crc(tmp_pat
 
 def test_a_chunk_without_a_crc_found_by_its_chunk_index(tmp_path):
     """
+    A chunk without a crc found by its chunk index.
+
     test_records_the_walk_cannot_take_are_found_by_the_summarys_indexes with a CRC of 0
     in the chunk the walk cannot take: its records are checked whole instead, and read.
     """
@@ -1001,6 +1023,8 @@ def test_a_chunk_without_a_crc_found_by_its_chunk_index(tmp_path):
 
 def test_a_message_index_naming_a_channel_not_in_its_chunk(tmp_path):
     """
+    A message index naming a channel not in its chunk.
+
     The second chunk's message index of /n relabelled /m (whose messages the chunk lacks):
     /m read first walks that chunk (said); then both channels are whole, as the mcap
     library's stream reader reads them.
@@ -1023,6 +1047,8 @@ def test_a_message_index_naming_a_channel_not_in_its_chunk(tmp_path):
 
 def test_a_damaged_chunk_the_walk_cannot_take_is_said(tmp_path):
     """
+    A damaged chunk the walk cannot take is said.
+
     A chunk's opcode flipped to a message's and a byte of its data flipped: the walk does
     not take it and its chunk index finds no whole chunk there. Said (it was lost without
     a word); every other message read, as the mcap library's stream reader reads the file

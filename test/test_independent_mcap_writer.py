@@ -57,12 +57,12 @@ def chunk_by_hand(body):
 
 
 def message_record(channel, log_time, data):
-    """A Message record by hand: sequence 0, publish time = log time."""
+    """Return a Message record by hand: sequence 0, publish time = log time."""
     return struct.pack('<BQHIQQ', MESSAGE, 22 + len(data), channel, 0, log_time, log_time) + data
 
 
 def index_record(channel, entries):
-    """A Message Index record by hand: [(log time, offset in the chunk's records)]."""
+    """Return a Message Index record by hand: [(log time, offset in the chunk's records)]."""
     body = b''.join(struct.pack('<QQ', t, o) for t, o in entries)
     return struct.pack('<BQHI', MESSAGE_INDEX, 6 + len(body), channel, len(body)) + body
 
@@ -667,6 +667,8 @@ def test_short_writes_are_completed(tmp_path, monkeypatch):
 
 def test_written_chunks_leave_the_page_cache(tmp_path, monkeypatch):
     """
+    Written chunks leave the page cache.
+
     Each chunk (with its message indexes) is advised out of the page cache when written,
     and again, then clean, when eight more chunks have been written.
     """
@@ -694,7 +696,7 @@ def test_written_chunks_leave_the_page_cache(tmp_path, monkeypatch):
 
 def test_a_block_of_joint_states_whose_last_bytes_are_no_field(tmp_path):
     """
-    JointState blocks (two joints; the empty effort's length after the last field).
+    Write JointState blocks (two joints; the empty effort's length after the last field).
 
     Two blocks of 4 and 3 samples, decoded by rosbags: names, stamps, positions and
     velocities as set, effort empty.
@@ -723,6 +725,8 @@ def test_a_block_of_joint_states_whose_last_bytes_are_no_field(tmp_path):
 
 def test_chunks_go_out_in_order_when_a_later_one_is_packed_first(tmp_path):
     """
+    Chunks go out in order when a later one is packed first.
+
     The first block's chunk is packed last (its fill waits for the later writes): the
     file still holds the chunks in the order written, as the chunk indexes list them.
     """

@@ -187,6 +187,8 @@ def test_a_joint_state_topic_without_messages_gives_no_samples(tmp_path):
 
 def test_every_output_wrench_is_pinocchios(replayed):
     """
+    Every output wrench is pinocchios.
+
     Each output topic's six numbers at every sample, by Pinocchio's RNEA at the input's
     angle and speed and the ramp's acceleration (2 rad/s^2; the estimate's slope is
     exact on a ramp from the second sample on): the bearing load and each support's (force
@@ -217,6 +219,8 @@ def test_every_output_wrench_is_pinocchios(replayed):
 
 def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_path):
     """
+    The default time constant forgets a ramp in a tenth of a second.
+
     A ramp (3 rad/s^2 for 1 s), then a steady 4 rad/s for 2 s: 20 default time constants
     (0.1 s) after the corner the drive torque is Pinocchio's at alpha 0, to 1e-6 of the
     ramp's own torque I_zz 3 rad/s^2 (measured 1e-7; a time constant of 1.1 s leaves a
@@ -246,7 +250,7 @@ def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_pat
 
 
 def joint_bag(path, stamps, messages):
-    """A bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
+    """Return a bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
     from cvc_balance.bag.mcap_writer import BagWriter
     joint = 'sensor_msgs/msg/JointState'
     types = TYPESTORE.types
@@ -268,6 +272,8 @@ def joint_bag(path, stamps, messages):
 
 def test_joint_states_without_the_joint_are_counted_and_named(tmp_path):
     """
+    Joint states without the joint are counted and named.
+
     Of 12 JointStates: 8 of the joint, 3 naming two other joints, 1 of the joint without a
     velocity: 12 samples, 8 accepted, 3 skipped (said with the joints they name, in
     order), 1 rejected. Only other joints: refused, naming them.
@@ -292,7 +298,7 @@ def test_joint_states_without_the_joint_are_counted_and_named(tmp_path):
 
 
 def tach_bag(path, missed=()):
-    """TimeReference marks on /tach every 0.25 s and on /keyphasor every 0.5 s (12 each)."""
+    """Return TimeReference marks on /tach every 0.25 s and on /keyphasor every 0.5 s (12 each)."""
     from cvc_balance.bag.mcap_writer import BagWriter
     from tach_bags import time_reference
     start = 3 * 10**9
@@ -309,6 +315,8 @@ def tach_bag(path, missed=()):
 
 def test_replay_reads_the_topics_it_is_given(tmp_path):
     """
+    Replay reads the topics it is given.
+
     replay(names=...): the keyphasor on /tach (4 rev/s), not the default /keyphasor (2);
     a mark missed on /tach is put back and said among the replay's problems.
     """
@@ -323,6 +331,8 @@ def test_replay_reads_the_topics_it_is_given(tmp_path):
 
 def test_stamps_ahead_of_the_log_times_by_more_than_max_stamp_jump(tmp_path):
     """
+    Stamps ahead of the log times by more than max stamp jump.
+
     From the 100th sample on the stamps run 0.5 s ahead of the log times: within the
     default max_stamp_jump (1 s) every sample is taken; with 0.25 s the replay takes
     what the stamp gate takes of those stamps and log times (in s), fewer.
@@ -351,6 +361,8 @@ def test_stamps_ahead_of_the_log_times_by_more_than_max_stamp_jump(tmp_path):
 
 def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
     """
+    The observer sees each layout and every sample.
+
     observer.layout(first stamp, model, segment_start_ns) for each layout (one logged
     before the samples, one after the first 50: its first stamp the 51st; one after the
     last sample: its own log time), samples(...)

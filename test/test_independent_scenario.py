@@ -325,6 +325,8 @@ def test_files_that_are_no_scenario(tmp_path):
 
 def test_the_bag_by_default_and_the_cells_noise(tmp_path):
     """
+    The bag by default and the cells noise.
+
     By default zstd chunks of at most 64 KiB; the cells' noise: the normal draws of the
     seed + 1 generator, per support its forces' (std: noise) then its torques' (a tenth).
     """

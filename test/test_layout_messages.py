@@ -318,8 +318,9 @@ def test_balancing_settings_take_effect():
     ({'name': 5}, 'component #2: field name must be a non-empty string, got 5'),
     ({'radius': 'x'}, "component 'detector': field radius must be a number, got 'x'"),
     ({'z': 'x'}, "component 'detector': field z must be a number, got 'x'"),
-    ({'mass': 0.0}, "component 'detector': field mass must be from 1e-06 to 1e+12 kg (a milligram or more:"
-                     " lighter is no part, and divides mass ratios to inf), got 0 kg"),
+    ({'mass': 0.0}, "component 'detector': field mass must be from 1e-06 to 1e+12 kg"
+                    " (a milligram or more: lighter is no part, and divides mass ratios to inf),"
+                    " got 0 kg"),
 ])
 def test_a_plain_component_is_refused_in_the_same_words(change, message):
     """A component of only name, mass, radius, angle, z is read on a fast path first."""
