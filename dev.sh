@@ -197,9 +197,14 @@ case "$cmd" in
       node_readers || echo "dev.sh: Foxglove's readers are not installed (test_foxglove_readers)" >&2
       chromium_browser || echo "dev.sh: the report's browser test will be skipped" >&2
       # colcon build and test (lint, thesis) beside pytest, which runs the other tests; the
-      # run fails if either does.
+      # run fails if either does. It holds the tests' lock shared (conftest.py's
+      # CVC_TEST_LOCK), so tests that must run alone wait for it too.
+      export CVC_TEST_LOCK="$here/.colcon.lock"
+      exec 9>"$CVC_TEST_LOCK"
+      flock -s 9
       colcon_check &
       colcon=$!
+      exec 9>&-
       set -- -k "not (lint or thesis)" "$@"
     fi
     # The package's bytecode once, not in every process the tests start (this machine's

@@ -58,13 +58,15 @@ def alone_when_marked(request, tmp_path_factory):
     With pytest-xdist workers, run a test marked ``alone`` with no other test beside it.
 
     Every test holds a shared lock on a file of this run (in the workers' common temporary
-    folder) while it runs; a test marked alone holds it exclusively, so it waits for the
-    other workers' tests to end and they wait for it.
+    folder, or ``CVC_TEST_LOCK``: dev.sh's colcon run beside the tests holds it shared too)
+    while it runs; a test marked alone holds it exclusively, so it waits for the other
+    workers' tests to end and they wait for it.
     """
-    if 'PYTEST_XDIST_WORKER' not in os.environ:     # one process: nothing runs beside a test
+    path = os.environ.get('CVC_TEST_LOCK')
+    if 'PYTEST_XDIST_WORKER' not in os.environ and path is None:   # nothing runs beside
         yield
         return
-    with open(tmp_path_factory.getbasetemp().parent / 'alone.lock', 'a') as lock:
+    with open(path or tmp_path_factory.getbasetemp().parent / 'alone.lock', 'a') as lock:
         alone = request.node.get_closest_marker('alone') is not None
         fcntl.flock(lock, fcntl.LOCK_EX if alone else fcntl.LOCK_SH)
         yield
