@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # cvc_balance developer entry point: sets up .venv on first use, then runs a job.
 #   ./dev.sh demo      the main job: a bundled bag played live into the node; its verdict, run, .rrd
-#   ./dev.sh test      the tests (colcon build + colcon test smoke, then the pytest suite)
+#   ./dev.sh test      the tests (colcon build + colcon test smoke beside the pytest suite)
 #   ./dev.sh test --quick   the edit-test loop: the pytest suite without its slow tests
 #   ./dev.sh setup     only (re)create the virtual environment
 #   ./dev.sh run CMD   run CMD inside the environment (e.g. ./dev.sh run cvc-balance --help)
