@@ -1066,3 +1066,135 @@ def test_a_damaged_chunk_the_walk_cannot_take_is_said(tmp_path):
     assert got == expected and 0 < len(expected) < 40
     assert bag.problems == [f"chunk at byte {at} (from the summary's chunk index) unreadable "
                             '(not a whole chunk whose CRC holds); skipped']
+
+
+# -- the survivors the third session left (issue 29, fourth session) ----------------------
+
+def test_a_damaged_record_with_no_whole_record_after_it_stops_the_walk(tmp_path):
+    """
+    Stop the walk at a damaged record of the data section that nothing whole follows.
+
+    The last chunk's records length says one byte more than its record holds: no whole
+    record after it (message indexes, the data end and the footer are no place to go on
+    at), so the walk stops there, saying so in the words for a data-section record; the
+    messages are those the mcap library's stream reader reads before that chunk.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a'), (2, 'b')]},
+                                      {1: [(5, 'c')], 2: [(7, 'm')]}]))
+    at = [o for o, op, _ in top_level(bytes(data)) if op == 0x06][1]
+    assert data[at + 37:at + 41] == b'\x00\x00\x00\x00'       # no compression: length 0
+    records_length, = struct.unpack_from('<Q', data, at + 41)
+    struct.pack_into('<Q', data, at + 41, records_length + 1)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(bytes(data[:at])) and len(got) == 2
+    assert bag.problems == [f'corrupt record (opcode 0x06) at byte {at}: chunk data beyond its '
+                            'record; stopped reading there']
+
+
+def test_a_message_right_after_a_chunk_found_by_its_index_is_kept(tmp_path):
+    """
+    Keep a message outside chunks that starts where a chunk found by its index ends.
+
+    The chunk's opcode flipped to a message's: the walk takes the chunk for a message
+    outside chunks, the summary's chunk index (added by hand) finds the chunk, and that
+    false message is dropped; the true one right after the chunk's end is kept. /n: the
+    chunk's two messages and that one, as the mcap library's stream reader reads the
+    undamaged file.
+    """
+    from mcap.records import ChunkIndex
+    whole = hand_built_file([{1: [(10, 'c1'), (11, 'c2')]}], loose_after=[(20, 'e')],
+                            indexes=False, summary=True)
+    records = top_level(whole)
+    at, length = next((o, n) for o, op, n in records if op == 0x06)
+    assert next(op for o, op, _ in records if o == at + 9 + length) == 0x05
+    records_length, = struct.unpack_from('<Q', whole, at + 41)
+    index = built(ChunkIndex(chunk_length=9 + length, chunk_start_offset=at, compression='',
+                             compressed_size=records_length, message_end_time=11,
+                             message_index_length=0, message_index_offsets={},
+                             message_start_time=10, uncompressed_size=records_length))
+    footer = len(whole) - len(MAGIC) - 29
+    data = bytearray(whole[:footer] + index + whole[footer:])
+    data[at] = 0x05
+    path = tmp_path / 'flipped.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    expected = read_before_the_cut(whole)
+    assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in expected] == ['c1', 'c2', 'e']
+    assert got == expected
+    assert bag.loose_messages() == [(1, at + 9 + length)]
+    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+
+
+def test_a_chunk_without_a_crc_whose_records_are_not_whole_is_not_taken(tmp_path):
+    """
+    Skip a CRC-less chunk whose records do not fill it, when its length field is damaged.
+
+    The second of three uncompressed chunks without a CRC: a message's length inside it
+    one byte longer (its records no longer fill the chunk) and the chunk's length field
+    1 MiB longer than the file. Nothing checks such a chunk but its records: it is not
+    read by its fields; the walk goes on at the next chunk (bytes by hand), and the
+    messages are those the mcap library's stream reader reads from the file without it.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a')]}, {1: [(2, 'b'), (5, 'c')]},
+                                      {1: [(7, 'd')]}], crc=False))
+    chunks = [(o, n) for o, op, n in top_level(bytes(data)) if op == 0x06]
+    (at, length), (following, _) = chunks[1], chunks[2]
+    second = at + 49 + 41          # its second message: after the first (41 bytes)
+    assert data[second] == 0x05 and struct.unpack_from('<Q', data, second + 1)[0] == 32
+    struct.pack_into('<Q', data, second + 1, 33)
+    struct.pack_into('<Q', data, at + 1, length + (1 << 20))
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    expected = read_before_the_cut(bytes(data[:at] + data[following:]))
+    assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in expected] == ['a', 'd']
+    assert got == expected
+    assert bag.problems == [f'record (opcode 0x06) at byte {at} runs past the end of the file: '
+                            f'{following - at} bytes skipped to the next whole record at byte '
+                            f'{following}']
+
+
+def test_joint_states_without_the_joint_of_several_layouts_are_all_counted(tmp_path):
+    """
+    Count the skipped and rejected JointStates of every layout; name at most 20 joints.
+
+    One chunk: JointStates naming 25 other joints (3), two other joints (2), the joint
+    without a velocity (2, and 3 more of another length), and the joint whole (6). The
+    counts are rosbags' (the joint not among the names: skipped; no velocity at its
+    index: rejected); the joints named are the first 20 of the first message without the
+    joint (until 20 are known, none are added).
+    """
+    many = [f'j{k:02d}' for k in range(25)]
+    kinds = [(many, [0.0] * 25, [0.0] * 25)] * 3 + [(['a', 'b'], [0.0, 0.0], [0.0, 0.0])] * 2 \
+        + [(['gantry_joint'], [0.5], [])] * 2 + [(['gantry_joint', 'x'], [0.5, 1.0], [])] * 3
+    order = [0, 5, 10, 3, 6, 1, 11, 7, 12, 4, 8, 2, 13, 9, 14, 15]
+    good = [(['gantry_joint'], [0.1 * k], [2.0 + k]) for k in range(6)]
+    everything = kinds + good
+    messages = [('/joint_states', 1_000 + n, joint_state(10 + n, n, 'f', *everything[k]))
+                for n, k in enumerate(order)]
+    path = write_with_mcap_library(tmp_path / 'joints.mcap', {'/joint_states': JOINT},
+                                   messages, chunk_size=1 << 20)
+    rows, skipped, rejected = [], 0, 0
+    with open(path, 'rb') as stream:
+        for _, _, m in make_reader(stream).iter_messages():
+            state = TYPESTORE.deserialize_cdr(m.data, JOINT)
+            if 'gantry_joint' not in state.name:
+                skipped += 1
+                continue
+            i = list(state.name).index('gantry_joint')
+            if len(state.velocity) <= i:
+                rejected += 1
+                continue
+            rows.append((state.header.stamp.sec * 10**9 + state.header.stamp.nanosec,
+                         m.log_time, state.position[i], state.velocity[i]))
+    assert (skipped, rejected, len(rows)) == (5, 5, 6)
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert (motion.skipped, motion.rejected) == (skipped, rejected)
+    assert motion.joints_seen == many[:20]
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == rows

@@ -249,8 +249,13 @@ def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_pat
     assert max(abs(a - b) for a, b in zip(torques[-10:], expected[-10:])) <= 1e-6 * ramp_torque
 
 
-def joint_bag(path, stamps, messages):
-    """Return a bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
+def joint_bag(path, stamps, messages, header_stamps=None):
+    """
+    Return a bag of /joint_states: messages [(names, position, velocity)] rosbags serialises.
+
+    Logged at ``stamps`` (ns), their headers stamped the same or ``header_stamps`` [(sec,
+    nanosec)].
+    """
     from cvc_balance.bag.mcap_writer import BagWriter
     joint = 'sensor_msgs/msg/JointState'
     types = TYPESTORE.types
@@ -260,10 +265,11 @@ def joint_bag(path, stamps, messages):
             types['std_msgs/msg/String'](data=yaml.safe_dump(GANTRY)),
             'std_msgs/msg/String').tobytes())
         channel = writer.add_channel('/joint_states', joint)
-        for ns, (names, position, velocity) in zip(stamps, messages):
+        header_stamps = header_stamps or [divmod(int(ns), 10**9) for ns in stamps]
+        for ns, (sec, nanosec), (names, position, velocity) in zip(stamps, header_stamps,
+                                                                   messages):
             msg = types[joint](header=types['std_msgs/msg/Header'](
-                stamp=types['builtin_interfaces/msg/Time'](sec=int(ns) // 10**9,
-                                                           nanosec=int(ns) % 10**9),
+                stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
                 frame_id=''), name=list(names), position=np.array(position, float),
                 velocity=np.array(velocity, float), effort=np.zeros(0))
             writer.write(channel, int(ns), TYPESTORE.serialize_cdr(msg, joint).tobytes())
@@ -421,3 +427,73 @@ def test_the_output_chunks_are_zstd_at_replays_level(replayed, tmp_path):
             chunk.data, max_output_size=chunk.uncompressed_size)
         assert chunk.data == zstandard.ZstdCompressor(level=-7).compress(records)
         assert chunk.data != zstandard.ZstdCompressor(level=1).compress(records)
+
+
+def test_stamps_whose_nanoseconds_are_not_below_a_second_are_rejected(tmp_path):
+    """
+    Reject a JointState whose stamp's nanosec is 10^9 or more, as any stamp not set.
+
+    builtin_interfaces/msg/Time: nanosec is below 10^9. Of 12 JointStates 5 ms apart (log
+    times as their stamps), the first stamped (4 s, 10^9 ns) (which read as a sum is the
+    second's 5 s) and the seventh (5 s, 2^32 - 1 ns): 12 samples, 10 accepted, 2 rejected.
+    """
+    stamps = 5 * 10**9 + 5_000_000 * np.arange(12)
+    header_stamps = [divmod(int(ns), 10**9) for ns in stamps]
+    header_stamps[0], header_stamps[6] = (4, 10**9), (5, 2**32 - 1)
+    messages = [(['gantry_joint'], [0.01 * k], [2.0]) for k in range(12)]
+    bag = joint_bag(tmp_path / 'stamps.mcap', stamps, messages, header_stamps)
+    summary = replay(bag)
+    assert (summary.samples, summary.accepted, summary.rejected) == (12, 10, 2)
+
+
+def test_the_observer_of_a_what_if_layout_sees_it_from_before_the_bag(tmp_path):
+    """
+    Give the observer a layout file's layout as in force from before the bag (0).
+
+    With samples: the first sample's stamp and 0; with no sample at all: 0 and 0.
+    """
+    class Observer:
+        def __init__(self):
+            self.layouts = []
+
+        def layout(self, stamp, model, segment_start_ns):
+            self.layouts.append((stamp, model.layout.name, segment_start_ns))
+
+        def samples(self, *_):
+            pass
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.1)
+    layout = [(int(stamps[0]) - 1000, yaml.safe_dump(dict(GANTRY, name='in the bag')))]
+    for path, first in ((write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega, layout),
+                         int(stamps[0])),
+                        (write_input_bag(tmp_path / 'none.mcap', [], [], [], layout), 0)):
+        observer = Observer()
+        replay(path, layout_file=GANTRY_FILE, observer=observer)
+        assert observer.layouts == [(first, GANTRY['name'], 0)], path.name
+
+
+def test_the_output_chunks_hold_up_to_4_mib(tmp_path):
+    """
+    Hold 2000 samples' outputs (over 1 MiB) in one chunk: replay's chunks are 4 MiB.
+
+    Five WrenchStamped a sample (the bearing, two supports, the unbalance, the drive
+    torque), each record 9 + 22 + 76 bytes by hand (CDR: encapsulation 4, stamp 8, frame
+    4 + 'stator' or 'rotor' with its NUL, padded to 8, six float64): 535 bytes a sample,
+    1,070,000 bytes in all, which the mcap library finds in one chunk.
+    """
+    stamps, angle, omega = ramp(1.0, 0.5, rate=200.0, seconds=10.0)
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, tmp_path / 'out.mcap', compression='')       # not compressed: faster
+    types = TYPESTORE.types
+    for frame in ('stator', 'rotor'):
+        empty = types[WRENCH](header=types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=0, nanosec=0), frame_id=frame),
+            wrench=types['geometry_msgs/msg/Wrench'](
+                force=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
+                torque=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)))
+        assert len(TYPESTORE.serialize_cdr(empty, WRENCH)) == 76
+    with open(tmp_path / 'out.mcap', 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert len(stamps) == 2000 and summary.statistics.message_count == 5 * 2000 + 1
+    assert 5 * 2000 * (9 + 22 + 76) == 1_070_000 > 1 << 20
+    assert max(i.uncompressed_size for i in summary.chunk_indexes) >= 1_070_000
