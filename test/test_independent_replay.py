@@ -11,6 +11,7 @@ S omega^2 with S = sum m r e^(i angle) of the layout's components by hand.
 import cmath
 import math
 from pathlib import Path
+import time
 
 from mcap.reader import make_reader
 import numpy as np
@@ -372,8 +373,9 @@ def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
     observer.layout(first stamp, model, segment_start_ns) for each layout (one logged
     before the samples, one after the first 50: its first stamp the 51st; one after the
     last sample: its own log time), samples(...)
-    with every accepted sample's stamp, angle and speed as read; a segment's first and
-    last log time (none for a layout no sample used).
+    with every accepted sample's stamp, angle and speed as read and the ramp's
+    acceleration; a segment's first and last log time (none for a layout no sample used);
+    the replay's seconds within those the test measured around it.
     """
     stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.5)
     unused, first = int(stamps[0]) - 2000, int(stamps[0]) - 1000
@@ -392,16 +394,20 @@ def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
             self.layouts.append((stamp, model.layout.name, segment_start_ns))
 
         def samples(self, stamp, angle, omega, alpha, result):
-            self.blocks.append((stamp, angle, omega))
+            self.blocks.append((stamp, angle, omega, alpha))
     observer = Observer()
+    started = time.perf_counter()
     summary = replay(bag, observer=observer)
+    assert 0.0 < summary.seconds <= time.perf_counter() - started
     assert observer.layouts == [(int(stamps[0]), 'unused', unused),
                                 (int(stamps[0]), GANTRY['name'], first),
                                 (int(stamps[50]), 'later', int(stamps[50]) - 1),
                                 (int(stamps[-1]) + 1000, 'after', int(stamps[-1]) + 1000)]
-    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(3)]
+    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(4)]
     assert got[0].tolist() == stamps.tolist()
     assert np.array_equal(got[1], angle) and np.array_equal(got[2], omega)
+    # the ramp's 2 rad/s^2: the estimate's slope, exact from the second sample on
+    np.testing.assert_allclose(got[3][1:], 2.0, rtol=1e-9)
     assert [(s.first_ns, s.last_ns, s.samples) for s in summary.segments] == \
         [(None, None, 0), (int(stamps[0]), int(stamps[49]), 50),
          (int(stamps[50]), int(stamps[-1]), 50), (None, None, 0)]
@@ -497,3 +503,15 @@ def test_the_output_chunks_hold_up_to_4_mib(tmp_path):
     assert len(stamps) == 2000 and summary.statistics.message_count == 5 * 2000 + 1
     assert 5 * 2000 * (9 + 22 + 76) == 1_070_000 > 1 << 20
     assert max(i.uncompressed_size for i in summary.chunk_indexes) >= 1_070_000
+
+
+def test_rejected_layout_messages_beyond_five_are_counted():
+    """Say seven rejected layout messages: the first five one by one, then all seven counted."""
+    from cvc_balance.bag.replay import layouts_in_force
+    messages = [(10**9, yaml.safe_dump(GANTRY))] + \
+        [(k * 10**9, 'components: [') for k in range(2, 9)]
+    events, problems = layouts_in_force(None, messages)
+    assert len(events) == 1 and len(problems) == 6
+    assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
+               for k, p in zip(range(2, 7), problems))
+    assert problems[5] == '7 layout messages rejected in all (the first 5 said above)'
