@@ -1173,7 +1173,8 @@ def test_joint_states_without_the_joint_of_several_layouts_are_all_counted(tmp_p
     order = [0, 5, 10, 3, 6, 1, 11, 7, 12, 4, 8, 2, 13, 9, 14, 15]
     good = [(['gantry_joint'], [0.1 * k], [2.0 + k]) for k in range(6)]
     everything = kinds + good
-    messages = [('/joint_states', 1_000 + n, joint_state(10 + n, n, 'f', *everything[k]))
+    messages = [('/joint_states', 1_000 + n,                # stamps of 2023: over 2^53 ns
+                 joint_state(1_700_000_000 + n, 123_456_789 + n, 'f', *everything[k]))
                 for n, k in enumerate(order)]
     path = write_with_mcap_library(tmp_path / 'joints.mcap', {'/joint_states': JOINT},
                                    messages, chunk_size=1 << 20)
@@ -1198,3 +1199,167 @@ def test_joint_states_without_the_joint_of_several_layouts_are_all_counted(tmp_p
     assert motion.joints_seen == many[:20]
     assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
                     motion.omega.tolist())) == rows
+
+
+def test_which_topic_a_name_chooses_and_the_refusals():
+    """
+    Choose a topic by its name, with or without '/', or by the one topic ending in it.
+
+    By hand: the name itself first (a namespaced one then does not count); else the only
+    topic ending in '/' + name (not with ``exact``); none: None. Two matching topics, a
+    topic without a schema of the wrong type, a bag of no topic: the words people read,
+    with the option that chooses one when there is one.
+    """
+    from cvc_balance.bag.mcap_reader import (BagError, ChannelInfo, describe_topics,
+                                             select_channel)
+    speed = ChannelInfo(1, '/speed', FLOAT64, 'cdr')
+    spaced = ChannelInfo(2, '/gantry/joint_states', JOINT, 'cdr')
+    other = ChannelInfo(3, '/arm/joint_states', JOINT, 'cdr')
+    plain = ChannelInfo(4, 'joint_states/', JOINT, 'cdr')
+    assert select_channel([speed, spaced], '/speed/', FLOAT64, 'x') is speed
+    assert select_channel([speed, spaced], 'joint_states', JOINT, 'x') is spaced
+    assert select_channel([speed, spaced], 'joint_states', JOINT, 'x', exact=True) is None
+    assert select_channel([spaced, other, plain], '/joint_states', JOINT, 'x') is plain
+    assert select_channel([speed], 'states', JOINT, 'x') is None
+    upper = ChannelInfo(6, '/speedX', FLOAT64, 'cdr')       # only '/' is taken off the ends
+    assert select_channel([speed, upper], 'speedX', FLOAT64, 'x') is upper
+    assert select_channel([speed, upper], 'speed', FLOAT64, 'x') is speed
+    for option, said in ((None, ''), ('--joint-states', ' with --joint-states')):
+        with pytest.raises(BagError) as refused:
+            select_channel([speed, spaced, other], 'joint_states', JOINT, 'x.mcap', option)
+        assert str(refused.value) == ('x.mcap: several topics match joint_states: '
+                                      f'/arm/joint_states, /gantry/joint_states; choose one{said}')
+    with pytest.raises(BagError) as refused:
+        select_channel([ChannelInfo(5, '/speed', '', 'cdr')], 'speed', FLOAT64, 'x.mcap')
+    assert str(refused.value) == ('x.mcap: topic /speed has type (none), expected '
+                                  f'{FLOAT64}; the bag has: /speed (no schema)')
+    assert describe_topics([]) == 'none'
+
+
+def test_a_bags_topic_chosen_with_its_option(tmp_path):
+    """Bag.channel: the bag's path in the words, the option named, ``exact`` kept."""
+    from cvc_balance.bag.mcap_reader import BagError
+    path = write_with_mcap_library(
+        tmp_path / 'two.mcap', {'/a/n': STRING, '/b/n': STRING, '/c/m': STRING},
+        [('/a/n', 1, b'\x00\x01\x00\x00\x01\x00\x00\x00\x00')])
+    bag = Bag(path)
+    assert bag.channel('m', STRING).topic == '/c/m' and bag.channel('m', STRING, exact=True) \
+        is None
+    with pytest.raises(BagError) as refused:
+        bag.channel('n', STRING, '--note-topic')
+    assert str(refused.value) == (f'{path}: several topics match n: /a/n, /b/n; choose one '
+                                  'with --note-topic')
+
+
+def test_columns_grow_to_take_more_rows_than_they_were_made_for():
+    """Rows taken past the capacity (none, one) keep what was filled, in order, and dtypes."""
+    from cvc_balance.bag.mcap_reader import _Columns
+    for capacity, counts in ((0, (3, 2, 4)), (1, (1, 1, 3))):
+        columns = _Columns((np.int64, float), capacity)
+        rows = 0
+        for count in counts:
+            whole, real = columns.take(count)
+            whole[:] = np.arange(rows, rows + count) + 2**60
+            real[:] = np.arange(rows, rows + count) * 0.5
+            rows += count
+        whole, real = columns.filled()
+        assert whole.dtype == np.int64 and whole.tolist() == [2**60 + k for k in range(rows)]
+        assert real.tolist() == [0.5 * k for k in range(rows)]
+
+
+def test_float64_messages_spaced_unevenly_are_not_read_as_evenly_spaced(tmp_path):
+    """
+    Read Float64s whose records are 100, 90 and 110 bytes apart (on average 100).
+
+    Between them String records of 57, 47 and 67 bytes (the Float64 records are 43): the
+    first and last offsets are three average steps apart, but the steps differ. The
+    values and log times are the mcap library's, decoded by rosbags.
+    """
+    def note(k):
+        data = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='x' * k), STRING)
+        assert 31 + len(data) == k + 40
+        return data.tobytes()
+    messages = []
+    for n, k in enumerate((17, 7, 27, None)):
+        messages.append(('/speed', 10 + n, float64(1.5 * n - 1.0)))
+        if k is not None:
+            messages.append(('/note', 10 + n, note(k)))
+    path = write_with_mcap_library(tmp_path / 'uneven.mcap', {'/speed': FLOAT64,
+                                                              '/note': STRING}, messages)
+    with open(path, 'rb') as stream:
+        theirs = [(m.log_time, TYPESTORE.deserialize_cdr(m.data, FLOAT64).data)
+                  for _, _, m in make_reader(stream).iter_messages(topics=['/speed'])]
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    offsets = bag.chunks[0].indexes[bag.channel('/speed', FLOAT64).id]
+    assert np.diff(offsets).tolist() == [100, 90, 110]
+    times, values = float64_samples(bag, bag.channel('/speed', FLOAT64))
+    assert list(zip(times.tolist(), values.tolist())) == theirs and len(theirs) == 4
+
+
+def test_a_message_index_pointing_past_its_chunk_walks_it(tmp_path):
+    """
+    Walk a chunk whose message index points at its last byte (a message cannot start there).
+
+    Said, and every message read as the mcap library's stream reader reads them.
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap', compression=CompressionType.NONE)
+                     .read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    records_length, = struct.unpack_from('<Q', data, chunk + 41)
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07 and
+                 struct.unpack_from('<H', data, o + 9)[0] == 1)
+    struct.pack_into('<Q', data, index + 9 + 6 + 8 + 16, records_length - 1)
+    path = tmp_path / 'past.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == stream_messages(bytes(data), '/n') and len(got) == 40
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /n does not point at its '
+                            'messages; chunk walked instead']
+
+
+def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
+    """
+    Keep the header, each definition and attachment as the file has them, ids up to 2^16.
+
+    A file built record by record: a Channel (id 40000) before its Schema (id 40001), a
+    channel without a schema (schema id 0), an Attachment, loose messages (one of no
+    data at all, the shortest message record; two at one log time, in file order against
+    the order of their texts). By hand from the file's top-level records: the Header's
+    bytes, each Schema's and Channel's record, the attachment's offset and length, each
+    channel (its type from the later Schema; '' without one), how many messages it has,
+    and the texts in log-time order (ties in file order), as the mcap library's stream
+    reader reads them.
+    """
+    from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, Schema
+    from cvc_balance.bag.mcap_reader import ChannelInfo
+    texts = [(30, 'b'), (30, 'a'), (20, 'z')]
+    data = MAGIC + built(
+        Header(profile='ros2', library='by hand'),
+        Channel(id=40000, schema_id=40001, topic='/n', message_encoding='cdr', metadata={}),
+        Schema(id=40001, name=STRING, encoding='ros2msg', data=b''),
+        Channel(id=7, schema_id=0, topic='/raw', message_encoding='', metadata={}),
+        Attachment(create_time=1, log_time=2, name='notes.txt', media_type='text/plain',
+                   data=b'hello'),
+        *(string_record(40000, t, text) for t, text in texts),
+        Message(channel_id=7, sequence=0, log_time=40, publish_time=40, data=b''),
+        DataEnd(data_section_crc=0),
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0)) + MAGIC
+    path = tmp_path / 'records.mcap'
+    path.write_bytes(data)
+    records = top_level(data)
+    whole = {op: [data[o:o + 9 + n] for o, o2, n in records if o2 == op] for _, op, _ in records}
+    attachment, = [(o, 9 + n) for o, op, n in records if op == 0x09]
+    bag = Bag(path)
+    assert bag.problems == []
+    assert bag.header == whole[0x01][0] and bag.attachments == [attachment]
+    assert bag.definitions == {(0x04, 40000): whole[0x04][0], (0x03, 40001): whole[0x03][0],
+                               (0x04, 7): whole[0x04][1]}
+    assert bag.channels == {40000: ChannelInfo(40000, '/n', STRING, 'cdr', 40001),
+                            7: ChannelInfo(7, '/raw', '', '', 0)}
+    note, raw = bag.channels[40000], bag.channels[7]
+    assert (bag.message_count(note), bag.message_count(raw)) == (3, 1)
+    assert bag.messages(raw) == [(40, b'')] == read_before_the_cut(data, '/raw')
+    assert bag.messages(note) == read_before_the_cut(data)
+    assert string_samples(bag, note) == [(20, 'z'), (30, 'b'), (30, 'a')]
