@@ -1330,7 +1330,8 @@ def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
     bytes, each Schema's and Channel's record, the attachment's offset and length, each
     channel (its type from the later Schema; '' without one), how many messages it has,
     and the texts in log-time order (ties in file order), as the mcap library's stream
-    reader reads them.
+    reader reads them. A file without a Header record: no header; its messages counted,
+    loose and in a chunk.
     """
     from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, Schema
     from cvc_balance.bag.mcap_reader import ChannelInfo
@@ -1363,3 +1364,10 @@ def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
     assert bag.messages(raw) == [(40, b'')] == read_before_the_cut(data, '/raw')
     assert bag.messages(note) == read_before_the_cut(data)
     assert string_samples(bag, note) == [(20, 'z'), (30, 'b'), (30, 'a')]
+    full = hand_built_file([{1: [(20, 'c'), (21, 'd')]}], loose_before=[(10, 'e')])
+    (_, _, length), = [r for r in top_level(full) if r[1] == 0x01]
+    headless = tmp_path / 'headless.mcap'          # no Header record; messages in a chunk
+    headless.write_bytes(full[:8] + full[8 + 9 + length:])
+    bag = Bag(headless)
+    assert bag.header is None and bag.problems == []
+    assert bag.message_count(bag.channel('/n', STRING)) == len(read_before_the_cut(full)) == 3
