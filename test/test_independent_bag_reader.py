@@ -1409,3 +1409,36 @@ def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
                             f'{following - at} bytes skipped to the next whole record at byte '
                             f'{following}']
     assert bag.metadata == []
+
+
+def test_metadata_bytes_split_message_indexes_and_a_record_too_short_for_a_message(tmp_path):
+    """
+    Keep a metadata record's bytes, join a chunk's two message indexes of one channel.
+
+    By hand from the top-level records: the metadata record as the file has it (a rewrite
+    copies it); a chunk whose messages of /n are listed by two message index records (one
+    entry each): both messages, where the entries say, as the mcap library's stream
+    reader reads them; a record of a message's opcode one byte too short for one (21
+    bytes) at the end of the data: no message.
+    """
+    from mcap.records import MessageIndex, Metadata
+    whole = hand_built_file([{1: [(1, 'a'), (2, 'b')]}])
+    records = top_level(whole)
+    index, length = next((o, n) for o, op, n in records if op == 0x07)
+    entries = struct.unpack_from('<QQQQ', whole, index + 9 + 6)
+    split = built(MessageIndex(channel_id=1, records=[entries[:2]]),
+                  MessageIndex(channel_id=1, records=[entries[2:]]))
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    metadata = built(Metadata(name='m', metadata={'k': 'v'}))
+    short = record(0x05, struct.pack('<HIQ', 1, 0, 3) + bytes(7))
+    data = whole[:index] + split + whole[index + 9 + length:data_end] + metadata + short + \
+        whole[data_end:]
+    path = tmp_path / 'split.mcap'
+    path.write_bytes(data)
+    at = next(o for o, op, _ in top_level(data) if op == 0x0C)
+    bag = Bag(path)
+    assert bag.problems == [] and bag.loose_messages() == []
+    assert bag.metadata == [(at, 'm', {'k': 'v'}, data[at:at + len(metadata)])]
+    assert bag.chunks[0].indexes[1].tolist() == [entries[1], entries[3]] == [0, 41]
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(whole)
+    assert len(read_before_the_cut(whole)) == 2
