@@ -1066,3 +1066,379 @@ def test_a_damaged_chunk_the_walk_cannot_take_is_said(tmp_path):
     assert got == expected and 0 < len(expected) < 40
     assert bag.problems == [f"chunk at byte {at} (from the summary's chunk index) unreadable "
                             '(not a whole chunk whose CRC holds); skipped']
+
+
+# -- the survivors the third session left (issue 29, fourth session) ----------------------
+
+def test_a_damaged_record_with_no_whole_record_after_it_stops_the_walk(tmp_path):
+    """
+    Stop the walk at a damaged record of the data section that nothing whole follows.
+
+    The last chunk's records length says one byte more than its record holds: no whole
+    record after it (message indexes, the data end and the footer are no place to go on
+    at), so the walk stops there, saying so in the words for a data-section record; the
+    messages are those the mcap library's stream reader reads before that chunk.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a'), (2, 'b')]},
+                                      {1: [(5, 'c')], 2: [(7, 'm')]}]))
+    at = [o for o, op, _ in top_level(bytes(data)) if op == 0x06][1]
+    assert data[at + 37:at + 41] == b'\x00\x00\x00\x00'       # no compression: length 0
+    records_length, = struct.unpack_from('<Q', data, at + 41)
+    struct.pack_into('<Q', data, at + 41, records_length + 1)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(bytes(data[:at])) and len(got) == 2
+    assert bag.problems == [f'corrupt record (opcode 0x06) at byte {at}: chunk data beyond its '
+                            'record; stopped reading there']
+
+
+def test_a_message_right_after_a_chunk_found_by_its_index_is_kept(tmp_path):
+    """
+    Keep a message outside chunks that starts where a chunk found by its index ends.
+
+    The chunk's opcode flipped to a message's: the walk takes the chunk for a message
+    outside chunks, the summary's chunk index (added by hand) finds the chunk, and that
+    false message is dropped; the true one right after the chunk's end is kept. /n: the
+    chunk's two messages and that one, as the mcap library's stream reader reads the
+    undamaged file.
+    """
+    from mcap.records import ChunkIndex
+    whole = hand_built_file([{1: [(10, 'c1'), (11, 'c2')]}], loose_after=[(20, 'e')],
+                            indexes=False, summary=True)
+    records = top_level(whole)
+    at, length = next((o, n) for o, op, n in records if op == 0x06)
+    assert next(op for o, op, _ in records if o == at + 9 + length) == 0x05
+    records_length, = struct.unpack_from('<Q', whole, at + 41)
+    index = built(ChunkIndex(chunk_length=9 + length, chunk_start_offset=at, compression='',
+                             compressed_size=records_length, message_end_time=11,
+                             message_index_length=0, message_index_offsets={},
+                             message_start_time=10, uncompressed_size=records_length))
+    footer = len(whole) - len(MAGIC) - 29
+    data = bytearray(whole[:footer] + index + whole[footer:])
+    data[at] = 0x05
+    path = tmp_path / 'flipped.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    expected = read_before_the_cut(whole)
+    assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in expected] == ['c1', 'c2', 'e']
+    assert got == expected
+    assert bag.loose_messages() == [(1, at + 9 + length)]
+    assert bag.problems == ["1 chunks read where the summary's chunk indexes put them (the "
+                            'walk did not reach them whole)']
+
+
+def test_a_chunk_without_a_crc_whose_records_are_not_whole_is_not_taken(tmp_path):
+    """
+    Skip a CRC-less chunk whose records do not fill it, when its length field is damaged.
+
+    The second of three uncompressed chunks without a CRC: a message's length inside it
+    one byte longer (its records no longer fill the chunk) and the chunk's length field
+    1 MiB longer than the file. Nothing checks such a chunk but its records: it is not
+    read by its fields; the walk goes on at the next chunk (bytes by hand), and the
+    messages are those the mcap library's stream reader reads from the file without it.
+    """
+    data = bytearray(hand_built_file([{1: [(1, 'a')]}, {1: [(2, 'b'), (5, 'c')]},
+                                      {1: [(7, 'd')]}], crc=False))
+    chunks = [(o, n) for o, op, n in top_level(bytes(data)) if op == 0x06]
+    (at, length), (following, _) = chunks[1], chunks[2]
+    second = at + 49 + 41          # its second message: after the first (41 bytes)
+    assert data[second] == 0x05 and struct.unpack_from('<Q', data, second + 1)[0] == 32
+    struct.pack_into('<Q', data, second + 1, 33)
+    struct.pack_into('<Q', data, at + 1, length + (1 << 20))
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    expected = read_before_the_cut(bytes(data[:at] + data[following:]))
+    assert [TYPESTORE.deserialize_cdr(d, STRING).data for _, d in expected] == ['a', 'd']
+    assert got == expected
+    assert bag.problems == [f'record (opcode 0x06) at byte {at} runs past the end of the file: '
+                            f'{following - at} bytes skipped to the next whole record at byte '
+                            f'{following}']
+
+
+def test_joint_states_without_the_joint_of_several_layouts_are_all_counted(tmp_path):
+    """
+    Count the skipped and rejected JointStates of every layout; name at most 20 joints.
+
+    One chunk: JointStates naming 25 other joints (3), two other joints (2), the joint
+    without a velocity (2, and 3 more of another length), and the joint whole (6). The
+    counts are rosbags' (the joint not among the names: skipped; no velocity at its
+    index: rejected); the joints named are the first 20 of the first message without the
+    joint (until 20 are known, none are added).
+    """
+    many = [f'j{k:02d}' for k in range(25)]
+    kinds = [(many, [0.0] * 25, [0.0] * 25)] * 3 + [(['a', 'b'], [0.0, 0.0], [0.0, 0.0])] * 2 \
+        + [(['gantry_joint'], [0.5], [])] * 2 + [(['gantry_joint', 'x'], [0.5, 1.0], [])] * 3
+    order = [0, 5, 10, 3, 6, 1, 11, 7, 12, 4, 8, 2, 13, 9, 14, 15]
+    good = [(['gantry_joint'], [0.1 * k], [2.0 + k]) for k in range(6)]
+    everything = kinds + good
+    messages = [('/joint_states', 1_000 + n,                # stamps of 2023: over 2^53 ns
+                 joint_state(1_700_000_000 + n, 123_456_789 + n, 'f', *everything[k]))
+                for n, k in enumerate(order)]
+    path = write_with_mcap_library(tmp_path / 'joints.mcap', {'/joint_states': JOINT},
+                                   messages, chunk_size=1 << 20)
+    rows, skipped, rejected = [], 0, 0
+    with open(path, 'rb') as stream:
+        for _, _, m in make_reader(stream).iter_messages():
+            state = TYPESTORE.deserialize_cdr(m.data, JOINT)
+            if 'gantry_joint' not in state.name:
+                skipped += 1
+                continue
+            i = list(state.name).index('gantry_joint')
+            if len(state.velocity) <= i:
+                rejected += 1
+                continue
+            rows.append((state.header.stamp.sec * 10**9 + state.header.stamp.nanosec,
+                         m.log_time, state.position[i], state.velocity[i]))
+    assert (skipped, rejected, len(rows)) == (5, 5, 6)
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    motion = joint_samples(bag, bag.channel('/joint_states', JOINT), 'gantry_joint')
+    assert (motion.skipped, motion.rejected) == (skipped, rejected)
+    assert motion.joints_seen == many[:20]
+    assert list(zip(motion.stamp.tolist(), motion.log_time.tolist(), motion.angle.tolist(),
+                    motion.omega.tolist())) == rows
+
+
+def test_which_topic_a_name_chooses_and_the_refusals():
+    """
+    Choose a topic by its name, with or without '/', or by the one topic ending in it.
+
+    By hand: the name itself first (a namespaced one then does not count); else the only
+    topic ending in '/' + name (not with ``exact``); none: None. Two matching topics, a
+    topic without a schema of the wrong type, a bag of no topic: the words people read,
+    with the option that chooses one when there is one.
+    """
+    from cvc_balance.bag.mcap_reader import (BagError, ChannelInfo, describe_topics,
+                                             select_channel)
+    speed = ChannelInfo(1, '/speed', FLOAT64, 'cdr')
+    spaced = ChannelInfo(2, '/gantry/joint_states', JOINT, 'cdr')
+    other = ChannelInfo(3, '/arm/joint_states', JOINT, 'cdr')
+    plain = ChannelInfo(4, 'joint_states/', JOINT, 'cdr')
+    assert select_channel([speed, spaced], '/speed/', FLOAT64, 'x') is speed
+    assert select_channel([speed, spaced], 'joint_states', JOINT, 'x') is spaced
+    assert select_channel([speed, spaced], 'joint_states', JOINT, 'x', exact=True) is None
+    assert select_channel([spaced, other, plain], '/joint_states', JOINT, 'x') is plain
+    assert select_channel([speed], 'states', JOINT, 'x') is None
+    upper = ChannelInfo(6, '/speedX', FLOAT64, 'cdr')       # only '/' is taken off the ends
+    assert select_channel([speed, upper], 'speedX', FLOAT64, 'x') is upper
+    assert select_channel([speed, upper], 'speed', FLOAT64, 'x') is speed
+    for option, said in ((None, ''), ('--joint-states', ' with --joint-states')):
+        with pytest.raises(BagError) as refused:
+            select_channel([speed, spaced, other], 'joint_states', JOINT, 'x.mcap', option)
+        assert str(refused.value) == ('x.mcap: several topics match joint_states: '
+                                      f'/arm/joint_states, /gantry/joint_states; choose one{said}')
+    with pytest.raises(BagError) as refused:
+        select_channel([ChannelInfo(5, '/speed', '', 'cdr')], 'speed', FLOAT64, 'x.mcap')
+    assert str(refused.value) == ('x.mcap: topic /speed has type (none), expected '
+                                  f'{FLOAT64}; the bag has: /speed (no schema)')
+    assert describe_topics([]) == 'none'
+
+
+def test_a_bags_topic_chosen_with_its_option(tmp_path):
+    """Bag.channel: the bag's path in the words, the option named, ``exact`` kept."""
+    from cvc_balance.bag.mcap_reader import BagError
+    path = write_with_mcap_library(
+        tmp_path / 'two.mcap', {'/a/n': STRING, '/b/n': STRING, '/c/m': STRING},
+        [('/a/n', 1, b'\x00\x01\x00\x00\x01\x00\x00\x00\x00')])
+    bag = Bag(path)
+    assert bag.channel('m', STRING).topic == '/c/m' and bag.channel('m', STRING, exact=True) \
+        is None
+    with pytest.raises(BagError) as refused:
+        bag.channel('n', STRING, '--note-topic')
+    assert str(refused.value) == (f'{path}: several topics match n: /a/n, /b/n; choose one '
+                                  'with --note-topic')
+
+
+def test_columns_grow_to_take_more_rows_than_they_were_made_for():
+    """Rows taken past the capacity (none, one) keep what was filled, in order, and dtypes."""
+    from cvc_balance.bag.mcap_reader import _Columns
+    for capacity, counts in ((0, (3, 2, 4)), (1, (1, 1, 3))):
+        columns = _Columns((np.int64, float), capacity)
+        rows = 0
+        for count in counts:
+            whole, real = columns.take(count)
+            whole[:] = np.arange(rows, rows + count) + 2**60
+            real[:] = np.arange(rows, rows + count) * 0.5
+            rows += count
+        whole, real = columns.filled()
+        assert whole.dtype == np.int64 and whole.tolist() == [2**60 + k for k in range(rows)]
+        assert real.tolist() == [0.5 * k for k in range(rows)]
+
+
+def test_float64_messages_spaced_unevenly_are_not_read_as_evenly_spaced(tmp_path):
+    """
+    Read Float64s whose records are 100, 90 and 110 bytes apart (on average 100).
+
+    Between them String records of 57, 47 and 67 bytes (the Float64 records are 43): the
+    first and last offsets are three average steps apart, but the steps differ. The
+    values and log times are the mcap library's, decoded by rosbags.
+    """
+    def note(k):
+        data = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='x' * k), STRING)
+        assert 31 + len(data) == k + 40
+        return data.tobytes()
+    messages = []
+    for n, k in enumerate((17, 7, 27, None)):
+        messages.append(('/speed', 10 + n, float64(1.5 * n - 1.0)))
+        if k is not None:
+            messages.append(('/note', 10 + n, note(k)))
+    path = write_with_mcap_library(tmp_path / 'uneven.mcap', {'/speed': FLOAT64,
+                                                              '/note': STRING}, messages)
+    with open(path, 'rb') as stream:
+        theirs = [(m.log_time, TYPESTORE.deserialize_cdr(m.data, FLOAT64).data)
+                  for _, _, m in make_reader(stream).iter_messages(topics=['/speed'])]
+    bag = Bag(path)
+    assert len(bag.chunks) == 1
+    offsets = bag.chunks[0].indexes[bag.channel('/speed', FLOAT64).id]
+    assert np.diff(offsets).tolist() == [100, 90, 110]
+    times, values = float64_samples(bag, bag.channel('/speed', FLOAT64))
+    assert list(zip(times.tolist(), values.tolist())) == theirs and len(theirs) == 4
+
+
+def test_a_message_index_pointing_past_its_chunk_walks_it(tmp_path):
+    """
+    Walk a chunk whose message index points at its last byte (a message cannot start there).
+
+    Said, and every message read as the mcap library's stream reader reads them.
+    """
+    data = bytearray(notes_bag(tmp_path / 'whole.mcap', compression=CompressionType.NONE)
+                     .read_bytes())
+    records = top_level(bytes(data))
+    chunk = [o for o, op, _ in records if op == 0x06][1]
+    records_length, = struct.unpack_from('<Q', data, chunk + 41)
+    index = next(o for o, op, _ in records if o > chunk and op == 0x07 and
+                 struct.unpack_from('<H', data, o + 9)[0] == 1)
+    struct.pack_into('<Q', data, index + 9 + 6 + 8 + 16, records_length - 1)
+    path = tmp_path / 'past.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == stream_messages(bytes(data), '/n') and len(got) == 40
+    assert bag.problems == [f'chunk at byte {chunk}: message index of /n does not point at its '
+                            'messages; chunk walked instead']
+
+
+def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
+    """
+    Keep the header, each definition and attachment as the file has them, ids up to 2^16.
+
+    A file built record by record: a Channel (id 40000) before its Schema (id 40001), a
+    channel without a schema (schema id 0), an Attachment, loose messages (one of no
+    data at all, the shortest message record; two at one log time, in file order against
+    the order of their texts). By hand from the file's top-level records: the Header's
+    bytes, each Schema's and Channel's record, the attachment's offset and length, each
+    channel (its type from the later Schema; '' without one), how many messages it has,
+    and the texts in log-time order (ties in file order), as the mcap library's stream
+    reader reads them. A file without a Header record: no header; its messages counted,
+    loose and in a chunk.
+    """
+    from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, Schema
+    from cvc_balance.bag.mcap_reader import ChannelInfo
+    texts = [(30, 'b'), (30, 'a'), (20, 'z')]
+    data = MAGIC + built(
+        Header(profile='ros2', library='by hand'),
+        Channel(id=40000, schema_id=40001, topic='/n', message_encoding='cdr', metadata={}),
+        Schema(id=40001, name=STRING, encoding='ros2msg', data=b''),
+        Channel(id=7, schema_id=0, topic='/raw', message_encoding='', metadata={}),
+        Attachment(create_time=1, log_time=2, name='notes.txt', media_type='text/plain',
+                   data=b'hello'),
+        *(string_record(40000, t, text) for t, text in texts),
+        Message(channel_id=7, sequence=0, log_time=40, publish_time=40, data=b''),
+        DataEnd(data_section_crc=0),
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0)) + MAGIC
+    path = tmp_path / 'records.mcap'
+    path.write_bytes(data)
+    records = top_level(data)
+    whole = {op: [data[o:o + 9 + n] for o, o2, n in records if o2 == op] for _, op, _ in records}
+    attachment, = [(o, 9 + n) for o, op, n in records if op == 0x09]
+    bag = Bag(path)
+    assert bag.problems == []
+    assert bag.header == whole[0x01][0] and bag.attachments == [attachment]
+    assert bag.definitions == {(0x04, 40000): whole[0x04][0], (0x03, 40001): whole[0x03][0],
+                               (0x04, 7): whole[0x04][1]}
+    assert bag.channels == {40000: ChannelInfo(40000, '/n', STRING, 'cdr', 40001),
+                            7: ChannelInfo(7, '/raw', '', '', 0)}
+    note, raw = bag.channels[40000], bag.channels[7]
+    assert (bag.message_count(note), bag.message_count(raw)) == (3, 1)
+    assert bag.messages(raw) == [(40, b'')] == read_before_the_cut(data, '/raw')
+    assert bag.messages(note) == read_before_the_cut(data)
+    assert string_samples(bag, note) == [(20, 'z'), (30, 'b'), (30, 'a')]
+    full = hand_built_file([{1: [(20, 'c'), (21, 'd')]}], loose_before=[(10, 'e')])
+    (_, _, length), = [r for r in top_level(full) if r[1] == 0x01]
+    headless = tmp_path / 'headless.mcap'          # no Header record; messages in a chunk
+    headless.write_bytes(full[:8] + full[8 + 9 + length:])
+    bag = Bag(headless)
+    assert bag.header is None and bag.problems == []
+    assert bag.message_count(bag.channel('/n', STRING)) == len(read_before_the_cut(full)) == 3
+
+
+@pytest.mark.parametrize('damaged', ['message index', 'metadata'])
+def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
+    """
+    Skip a message index whose entries, or a metadata record whose map, overrun the record.
+
+    The first chunk's message index says 16 bytes more of entries than it holds, or a
+    metadata record before the chunks says its map is a byte longer: said in the words for
+    that record (bytes by hand), the walk going on at the next chunk; every message read,
+    as the mcap library's stream reader reads the undamaged file (an index only locates
+    messages: that chunk is walked).
+    """
+    from mcap.records import Metadata
+    whole = hand_built_file([{1: [(1, 'a'), (2, 'b')]}, {1: [(5, 'c')]}])
+    chunks = [o for o, op, _ in top_level(whole) if op == 0x06]
+    if damaged == 'metadata':
+        whole = whole[:chunks[0]] + built(Metadata(name='m', metadata={'k': 'v'})) + \
+            whole[chunks[0]:]
+    records = top_level(whole)
+    data = bytearray(whole)
+    following = [o for o, op, _ in records if op == 0x06][1 if damaged != 'metadata' else 0]
+    if damaged == 'metadata':
+        at = next(o for o, op, _ in records if op == 0x0C)
+        field, why = at + 9 + 4 + 1, 'map beyond the record'
+        struct.pack_into('<I', data, field, struct.unpack_from('<I', data, field)[0] + 1)
+    else:
+        at = next(o for o, op, _ in records if op == 0x07)
+        field, why = at + 9 + 2, 'message index entries beyond its record'
+        struct.pack_into('<I', data, field, struct.unpack_from('<I', data, field)[0] + 16)
+    path = tmp_path / 'damaged.mcap'
+    path.write_bytes(bytes(data))
+    bag, got = ours(path)
+    assert got == read_before_the_cut(whole) and len(got) == 3
+    assert bag.problems == [f'corrupt record (opcode 0x{data[at]:02x}) at byte {at}: {why}: '
+                            f'{following - at} bytes skipped to the next whole record at byte '
+                            f'{following}']
+    assert bag.metadata == []
+
+
+def test_metadata_bytes_split_message_indexes_and_a_record_too_short_for_a_message(tmp_path):
+    """
+    Keep a metadata record's bytes, join a chunk's two message indexes of one channel.
+
+    By hand from the top-level records: the metadata record as the file has it (a rewrite
+    copies it); a chunk whose messages of /n are listed by two message index records (one
+    entry each): both messages, where the entries say, as the mcap library's stream
+    reader reads them; a record of a message's opcode one byte too short for one (21
+    bytes) at the end of the data: no message.
+    """
+    from mcap.records import MessageIndex, Metadata
+    whole = hand_built_file([{1: [(1, 'a'), (2, 'b')]}])
+    records = top_level(whole)
+    index, length = next((o, n) for o, op, n in records if op == 0x07)
+    entries = struct.unpack_from('<QQQQ', whole, index + 9 + 6)
+    split = built(MessageIndex(channel_id=1, records=[entries[:2]]),
+                  MessageIndex(channel_id=1, records=[entries[2:]]))
+    data_end = next(o for o, op, _ in records if op == 0x0F)
+    metadata = built(Metadata(name='m', metadata={'k': 'v'}))
+    short = record(0x05, struct.pack('<HIQ', 1, 0, 3) + bytes(7))
+    data = whole[:index] + split + whole[index + 9 + length:data_end] + metadata + short + \
+        whole[data_end:]
+    path = tmp_path / 'split.mcap'
+    path.write_bytes(data)
+    at = next(o for o, op, _ in top_level(data) if op == 0x0C)
+    bag = Bag(path)
+    assert bag.problems == [] and bag.loose_messages() == []
+    assert bag.metadata == [(at, 'm', {'k': 'v'}, data[at:at + len(metadata)])]
+    assert bag.chunks[0].indexes[1].tolist() == [entries[1], entries[3]] == [0, 41]
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(whole)
+    assert len(read_before_the_cut(whole)) == 2

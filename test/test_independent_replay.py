@@ -11,6 +11,7 @@ S omega^2 with S = sum m r e^(i angle) of the layout's components by hand.
 import cmath
 import math
 from pathlib import Path
+import time
 
 from mcap.reader import make_reader
 import numpy as np
@@ -249,8 +250,13 @@ def test_the_default_time_constant_forgets_a_ramp_in_a_tenth_of_a_second(tmp_pat
     assert max(abs(a - b) for a, b in zip(torques[-10:], expected[-10:])) <= 1e-6 * ramp_torque
 
 
-def joint_bag(path, stamps, messages):
-    """Return a bag of /joint_states: messages [(names, position, velocity)] rosbags serialises."""
+def joint_bag(path, stamps, messages, header_stamps=None):
+    """
+    Return a bag of /joint_states: messages [(names, position, velocity)] rosbags serialises.
+
+    Logged at ``stamps`` (ns), their headers stamped the same or ``header_stamps`` [(sec,
+    nanosec)].
+    """
     from cvc_balance.bag.mcap_writer import BagWriter
     joint = 'sensor_msgs/msg/JointState'
     types = TYPESTORE.types
@@ -260,10 +266,11 @@ def joint_bag(path, stamps, messages):
             types['std_msgs/msg/String'](data=yaml.safe_dump(GANTRY)),
             'std_msgs/msg/String').tobytes())
         channel = writer.add_channel('/joint_states', joint)
-        for ns, (names, position, velocity) in zip(stamps, messages):
+        header_stamps = header_stamps or [divmod(int(ns), 10**9) for ns in stamps]
+        for ns, (sec, nanosec), (names, position, velocity) in zip(stamps, header_stamps,
+                                                                   messages):
             msg = types[joint](header=types['std_msgs/msg/Header'](
-                stamp=types['builtin_interfaces/msg/Time'](sec=int(ns) // 10**9,
-                                                           nanosec=int(ns) % 10**9),
+                stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
                 frame_id=''), name=list(names), position=np.array(position, float),
                 velocity=np.array(velocity, float), effort=np.zeros(0))
             writer.write(channel, int(ns), TYPESTORE.serialize_cdr(msg, joint).tobytes())
@@ -366,8 +373,9 @@ def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
     observer.layout(first stamp, model, segment_start_ns) for each layout (one logged
     before the samples, one after the first 50: its first stamp the 51st; one after the
     last sample: its own log time), samples(...)
-    with every accepted sample's stamp, angle and speed as read; a segment's first and
-    last log time (none for a layout no sample used).
+    with every accepted sample's stamp, angle and speed as read and the ramp's
+    acceleration; a segment's first and last log time (none for a layout no sample used);
+    the replay's seconds within those the test measured around it.
     """
     stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.5)
     unused, first = int(stamps[0]) - 2000, int(stamps[0]) - 1000
@@ -386,16 +394,20 @@ def test_the_observer_sees_each_layout_and_every_sample(tmp_path):
             self.layouts.append((stamp, model.layout.name, segment_start_ns))
 
         def samples(self, stamp, angle, omega, alpha, result):
-            self.blocks.append((stamp, angle, omega))
+            self.blocks.append((stamp, angle, omega, alpha))
     observer = Observer()
+    started = time.perf_counter()
     summary = replay(bag, observer=observer)
+    assert 0.0 < summary.seconds <= time.perf_counter() - started
     assert observer.layouts == [(int(stamps[0]), 'unused', unused),
                                 (int(stamps[0]), GANTRY['name'], first),
                                 (int(stamps[50]), 'later', int(stamps[50]) - 1),
                                 (int(stamps[-1]) + 1000, 'after', int(stamps[-1]) + 1000)]
-    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(3)]
+    got = [np.concatenate([s[k] for s in observer.blocks]) for k in range(4)]
     assert got[0].tolist() == stamps.tolist()
     assert np.array_equal(got[1], angle) and np.array_equal(got[2], omega)
+    # the ramp's 2 rad/s^2: the estimate's slope, exact from the second sample on
+    np.testing.assert_allclose(got[3][1:], 2.0, rtol=1e-9)
     assert [(s.first_ns, s.last_ns, s.samples) for s in summary.segments] == \
         [(None, None, 0), (int(stamps[0]), int(stamps[49]), 50),
          (int(stamps[50]), int(stamps[-1]), 50), (None, None, 0)]
@@ -421,3 +433,85 @@ def test_the_output_chunks_are_zstd_at_replays_level(replayed, tmp_path):
             chunk.data, max_output_size=chunk.uncompressed_size)
         assert chunk.data == zstandard.ZstdCompressor(level=-7).compress(records)
         assert chunk.data != zstandard.ZstdCompressor(level=1).compress(records)
+
+
+def test_stamps_whose_nanoseconds_are_not_below_a_second_are_rejected(tmp_path):
+    """
+    Reject a JointState whose stamp's nanosec is 10^9 or more, as any stamp not set.
+
+    builtin_interfaces/msg/Time: nanosec is below 10^9. Of 12 JointStates 5 ms apart (log
+    times as their stamps), the first stamped (4 s, 10^9 ns) (which read as a sum is the
+    second's 5 s) and the seventh (5 s, 2^32 - 1 ns): 12 samples, 10 accepted, 2 rejected.
+    """
+    stamps = 5 * 10**9 + 5_000_000 * np.arange(12)
+    header_stamps = [divmod(int(ns), 10**9) for ns in stamps]
+    header_stamps[0], header_stamps[6] = (4, 10**9), (5, 2**32 - 1)
+    messages = [(['gantry_joint'], [0.01 * k], [2.0]) for k in range(12)]
+    bag = joint_bag(tmp_path / 'stamps.mcap', stamps, messages, header_stamps)
+    summary = replay(bag)
+    assert (summary.samples, summary.accepted, summary.rejected) == (12, 10, 2)
+
+
+def test_the_observer_of_a_what_if_layout_sees_it_from_before_the_bag(tmp_path):
+    """
+    Give the observer a layout file's layout as in force from before the bag (0).
+
+    With samples: the first sample's stamp and 0; with no sample at all: 0 and 0.
+    """
+    class Observer:
+        def __init__(self):
+            self.layouts = []
+
+        def layout(self, stamp, model, segment_start_ns):
+            self.layouts.append((stamp, model.layout.name, segment_start_ns))
+
+        def samples(self, *_):
+            pass
+    stamps, angle, omega = ramp(1.0, 2.0, rate=200.0, seconds=0.1)
+    layout = [(int(stamps[0]) - 1000, yaml.safe_dump(dict(GANTRY, name='in the bag')))]
+    for path, first in ((write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega, layout),
+                         int(stamps[0])),
+                        (write_input_bag(tmp_path / 'none.mcap', [], [], [], layout), 0)):
+        observer = Observer()
+        replay(path, layout_file=GANTRY_FILE, observer=observer)
+        assert observer.layouts == [(first, GANTRY['name'], 0)], path.name
+
+
+def test_the_output_chunks_hold_up_to_4_mib(tmp_path):
+    """
+    Hold 2000 samples' outputs (over 1 MiB) in one chunk: replay's chunks are 4 MiB.
+
+    Five WrenchStamped a sample (the bearing, two supports, the unbalance, the drive
+    torque), each record 9 + 22 + 76 bytes by hand (CDR: encapsulation 4, stamp 8, frame
+    4 + 'stator' or 'rotor' with its NUL, padded to 8, six float64): 535 bytes a sample,
+    1,070,000 bytes in all, which the mcap library finds in one chunk.
+    """
+    stamps, angle, omega = ramp(1.0, 0.5, rate=200.0, seconds=10.0)
+    bag = write_input_bag(tmp_path / 'in.mcap', stamps, angle, omega,
+                          [(stamps[0] - 1000, yaml.safe_dump(GANTRY))])
+    replay(bag, tmp_path / 'out.mcap', compression='')       # not compressed: faster
+    types = TYPESTORE.types
+    for frame in ('stator', 'rotor'):
+        empty = types[WRENCH](header=types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=0, nanosec=0), frame_id=frame),
+            wrench=types['geometry_msgs/msg/Wrench'](
+                force=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0),
+                torque=types['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.0)))
+        assert len(TYPESTORE.serialize_cdr(empty, WRENCH)) == 76
+    with open(tmp_path / 'out.mcap', 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert len(stamps) == 2000 and summary.statistics.message_count == 5 * 2000 + 1
+    assert 5 * 2000 * (9 + 22 + 76) == 1_070_000 > 1 << 20
+    assert max(i.uncompressed_size for i in summary.chunk_indexes) >= 1_070_000
+
+
+def test_rejected_layout_messages_beyond_five_are_counted():
+    """Say seven rejected layout messages: the first five one by one, then all seven counted."""
+    from cvc_balance.bag.replay import layouts_in_force
+    messages = [(10**9, yaml.safe_dump(GANTRY))] + \
+        [(k * 10**9, 'components: [') for k in range(2, 9)]
+    events, problems = layouts_in_force(None, messages)
+    assert len(events) == 1 and len(problems) == 6
+    assert all(p.startswith(f'layout at {k}.000 s rejected (previous stays in force): ')
+               for k, p in zip(range(2, 7), problems))
+    assert problems[5] == '7 layout messages rejected in all (the first 5 said above)'

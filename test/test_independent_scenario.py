@@ -106,6 +106,14 @@ def test_a_scenario_file_with_its_defaults(tmp_path):
                                          seed=7))
     assert (named.name, named.joint_name, named.start, named.seed) == ('named', 'j', 2.5, 7)
     assert named.stamps_ns()[0] == 2_500_000_000
+    spec = yaml.safe_load(write_scenario(tmp_path).read_text())
+    del spec['rate']
+    (tmp_path / 'rate.yaml').write_text(yaml.safe_dump(spec))
+    default_rate = load_scenario(tmp_path / 'rate.yaml')
+    assert default_rate.rate == 500.0 and len(default_rate.time) == 5 * 500 + 1
+    cells = load_scenario(write_scenario(tmp_path, load_cells={})).cells
+    assert cells == {'rate': 250.0, 'noise': 0.0,
+                     'bias': {'front': [0.0, 0.0, 0.0], 'rear': [0.0, 0.0, 0.0]}}
 
 
 def test_the_encoders_noise_is_seeded(tmp_path):
@@ -281,7 +289,32 @@ def test_the_written_bag_read_by_rosbags(tmp_path):
     ({'load_cells': {'bias': {'front': [0, 0]}}},
      "field load_cells.bias: give [x, y, z] N for supports of the layout (front, rear), got "
      "'front'"),
+    ({'load_cells': {'rate': 'fast'}}, "field load_cells: field rate must be a number, got "
+     "'fast'"),
+    ({'load_cells': {'noise': 'loud'}}, "field load_cells: field noise must be a number, got "
+     "'loud'"),
     ({'rate': 'fast'}, "field rate must be a number, got 'fast'"),
+    ({'rate': 10**400}, 'field rate must be finite, got inf'),
+    ({'rate': 0.5}, 'field rate must be from 1 to 100000 Hz (an encoder or a load cell: every '
+     'sample is held in memory), got 0.5 Hz'),
+    ({'start': 'soon'}, "field start must be a number, got 'soon'"),
+    ({'noise': [0.1]}, 'field noise: field angle must be a number, got None'),
+    ({'noise': {'speed': float('inf')}}, 'field noise: field speed must be finite, got inf'),
+    ({'profile': [{'type': 'spin_up', 'to': 'fast', 'alpha': 1.0}]},
+     "profile step 1 (spin_up): field to must be a number, got 'fast'"),
+    ({'profile': [{'type': 'spin_up', 'to': 1.0, 'alpha': 'x'}]},
+     "profile step 1 (spin_up): field alpha must be a number, got 'x'"),
+    ({'profile': [{'type': 'steady', 'duration': 'long'}]},
+     "profile step 1 (steady): field duration must be a number, got 'long'"),
+    ({'profile': [{'type': 'spin_up', 'to': 2e5, 'alpha': 1.0}]},
+     'profile step 1 (spin_up): field to (its size) must be from 0.001 to 100000 rad/s (a turn '
+     'in 100 minutes to 955 000 rpm: slower is no balancing speed, faster no rotor), got '
+     '200000 rad/s'),
+    ({'profile': [{'type': 'steady', 'duration': 1e12}]},
+     'the profile (1e+12 s at 100 samples/s) must be from 1 to 50000000 samples (about 3 GB '
+     'of arrays), got 100000000000001.0 samples'),
+    ({'hidden': ['x']}, 'hidden change 1: field at must be a time > 0 s'),
+    ({'events': [{'at': 1.0, 'set': {'mass': 1.0}}]}, 'event 1: no component None'),
     ({'rate': True}, 'field rate must be a number, got True'),
     ({'noise': {'angle': float('inf')}}, 'field noise: field angle must be finite, got inf'),
 ])
@@ -318,6 +351,26 @@ def test_files_that_are_no_scenario(tmp_path):
         load_scenario(path)
     assert str(refused.value) == (f'{path}: field layout: {tmp_path / "missing.yaml"}: cannot '
                                   'read layout: No such file or directory')
+    path.write_text(yaml.safe_dump({**LAYOUT, 'layout': LAYOUT, 'profile': []}))
+    with pytest.raises(ScenarioError) as refused:       # a profile: no layout file
+        load_scenario(path)
+    assert str(refused.value) == (f"{path}: unknown field 'components' (known: events, "
+                                  'hidden, joint_name, layout, load_cells, name, noise, '
+                                  'profile, rate, seed, start)')
+    path.write_text(yaml.safe_dump({'layout': LAYOUT}))
+    with pytest.raises(ScenarioError) as refused:
+        load_scenario(path)
+    assert str(refused.value) == f'{path}: field profile: needs at least one step'
+    for missing, said in ((tmp_path / 'none.yaml', 'cannot read scenario: No such file or '
+                           'directory'), (tmp_path, 'a directory, not a regular file: refused')):
+        with pytest.raises(ScenarioError) as refused:
+            load_scenario(missing)
+        assert str(refused.value) == f'{missing}: {said}'
+    path = write_scenario(tmp_path, rate='x' * 400)
+    with pytest.raises(ScenarioError) as refused:
+        load_scenario(path)
+    said = f"{path}: field rate must be a number, got '{'x' * 400}'"
+    assert str(refused.value) == said[:300] and len(said) > 400
     (tmp_path / 'drum.yaml').write_text(yaml.safe_dump(LAYOUT))
     assert load_scenario(write_scenario(tmp_path, layout='drum.yaml')).layouts == \
         [(0.0, LAYOUT)]
@@ -351,3 +404,52 @@ def test_the_bag_by_default_and_the_cells_noise(tmp_path):
         torque_noise = rng.normal(0.0, 0.3, torque.shape)
         assert np.abs(noisy[name][1] - (force + force_noise)).max() < 1e-9
         assert np.abs(noisy[name][2] - (torque + torque_noise)).max() < 1e-9
+
+
+def test_a_cell_reading_at_the_time_of_a_change_reads_the_changed_rotor(tmp_path):
+    """
+    Read the rotor as changed at a change's own time.
+
+    Cells at 128/3 readings/s: the front cell reads at (1 + 3 j) / 128 s, exact binary
+    fractions, and a hidden change at 31/128 s (its eleventh reading). That reading is
+    Pinocchio's support load of the changed rotor at the exact motion, the one before it
+    the rotor's before (no noise, no bias; held to 1e-9 of the load).
+    """
+    rate = 128 / 3
+    assert 3.0 * rate == 128.0 and 1.0 / rate == 3 / 128
+    hidden = [{'at': 31 / 128, 'set': {'component': 'tube', 'mass': 80.0}}]
+    run = load_scenario(write_scenario(
+        tmp_path, hidden=hidden, load_cells={'rate': rate},
+        profile=[{'type': 'spin_up', 'to': 6.0, 'alpha': 2.0}]))
+    stamps, force, _ = run.cell_readings()['front']
+    assert stamps[10] == 1_000_000_000 + round(Fraction(31, 128) * 10**9)
+    for j, rotor in ((9, PinocchioRotor(LAYOUT)), (10, PinocchioRotor(run.truths[1][1]))):
+        q, w, a = (float(v) for v in exact([(3, 2)], Fraction(1 + 3 * j, 128)))
+        expected = rotor.loads(q, w, a)['supports']['front'][0]
+        assert np.abs(force[j] - expected).max() <= 1e-9 * np.abs(expected).max(), j
+    assert abs(force[10][1] - force[9][1]) > 100.0
+
+
+def test_steps_shorter_than_a_second_and_the_fastest_speed(tmp_path):
+    """
+    Take a step of a quarter second, and a spin to the fastest speed a scenario may reach.
+
+    Spin up at 4 rad/s^2 to 1 rad/s (0.25 s), then steady 0.5 s: 76 samples at 100/s,
+    the pieces by hand. To 10^5 rad/s (the limit, included) at 10^5 rad/s^2: 1 s.
+    """
+    run = load_scenario(write_scenario(tmp_path, profile=[
+        {'type': 'spin_up', 'to': 1.0, 'alpha': 4.0}, {'type': 'steady', 'duration': 0.5}]))
+    assert run.pieces == [(0.25, 4.0), (0.5, 0.0)] and len(run.time) == 76
+    fastest = load_scenario(write_scenario(tmp_path, profile=[
+        {'type': 'spin_up', 'to': 1e5, 'alpha': 1e5}]))
+    assert fastest.pieces == [(1.0, 1e5)] and fastest.omega[-1] == 1e5
+
+
+def test_an_angle_set_in_the_unit_the_component_already_has(tmp_path):
+    """Replace degrees by degrees and radians by radians: the other unit was never there."""
+    run = load_scenario(write_scenario(tmp_path, events=[
+        {'at': 1.0, 'set': {'component': 'tube', 'angle_deg': 50.0}},
+        {'at': 2.0, 'set': {'component': 'lump', 'angle': 2.0}}]))
+    tube, lump = run.layouts[2][1]['components'][1:]
+    assert tube == {**LAYOUT['components'][1], 'angle_deg': 50.0}
+    assert lump == {**LAYOUT['components'][2], 'angle': 2.0}

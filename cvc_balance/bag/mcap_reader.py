@@ -865,7 +865,8 @@ class MotionSamples:
     Motion samples of a bag: stamp (ns), log time (ns), angle (rad), omega (rad/s).
 
     ``rejected`` messages could not be read; ``reasons`` say why. ``skipped``
-    JointState messages do not carry the joint (``joints_seen``: the names they have).
+    JointState messages do not carry the joint (``joints_seen``: the names they have,
+    at most 20 of a message, none added once 20 are known).
     ``problems``: what else the source's reader found (a keyphasor's marks repaired);
     ``joint_topic``: the JointState topic when the angle and speed are its position and
     velocity as sent (None for motion made from a speed or a keyphasor).

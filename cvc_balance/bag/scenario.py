@@ -22,7 +22,7 @@ or an inline mapping), a sample rate, noise, a speed profile and events::
       - {at: 0.0, add: {name: loose_bracket, mass: 0.3, radius: 0.5, angle_deg: 30.0}}
       - {at: 6.0, set: {component: xray_tube, mass: 61.0}}   # move the loads, not /layout
     load_cells:                        # a cell under each support: supports/<name>/measured_load
-      rate: 250                        # readings/s per cell
+      rate: 250                        # readings/s per cell (default 250)
       noise: 15.0                      # N, std of each force component (and 0.1 N m/N torque)
       bias: {front: [120.0, -340.0, 5.0], rear: [-80.0, 55.0, -3.0]}   # N, each cell's zero
 
