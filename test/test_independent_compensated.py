@@ -80,7 +80,7 @@ def test_power_of_two_above(value, want):
 def test_total_is_the_exact_sum_rounded_once_even_near_the_largest_float():
     """Where sigma = 2^64 of the bound would overflow the sum goes another way: also exact."""
     rng = np.random.default_rng(3)
-    for scale in (1.0, 1e-300, 1e290, 1e307):
+    for scale in (1.0, 1e-300, 1e290, 2.0 ** 1015, 1e307):    # 2^1015: sigma of 2^13 the bound
         hi = rng.normal(size=5000) * scale / 8
         hi[::2] = -hi[1::2] * (1 + 2.0 ** -40)           # pairs that nearly cancel
         lo = hi * 2.0 ** -60 * rng.uniform(-1, 1, hi.size)
