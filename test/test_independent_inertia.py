@@ -9,6 +9,7 @@ where a float64 sum of the same terms loses their last bits.
 
 from fractions import Fraction
 
+import mpmath as mp
 import numpy as np
 
 from cvc_balance.physics.inertia import place
@@ -32,3 +33,30 @@ def test_each_aggregate_is_its_exact_sum_where_a_float_sum_loses_the_last_bits()
     assert got.inertia.tolist() == want
     # The same terms summed in float64 lose them: what the extraction is for.
     assert float(np.sum(np.array(mass) * radius)) == radius
+
+
+def test_each_turned_own_tensor_is_its_exact_value_rounded():
+    """
+    One body at the axis: its tensor turned by theta, each element correctly rounded (mpmath).
+
+    R I R^T with R the turn by theta about z, at 50 digits; where an element cancels (a
+    product of inertia near 0) within 1e-30 of the tensor's size instead.
+    """
+    rng = np.random.default_rng(8)
+    special = [[[2.0, 0.5, 0.1], [0.5, 2.0, 0.2], [0.1, 0.2, 3.0]],    # I_xx = I_yy, I_xy
+               [[1.0, 0.0, 0.1], [0.0, 2.0, 0.2], [0.1, 0.2, 3.0]],    # no I_xy
+               [[1.0, 0.3, 0.0], [0.3, 2.0, 0.0], [0.0, 0.0, 3.0]]]    # no I_xz, I_yz
+    for k in range(120):
+        a = rng.uniform(0.5, 2.0, (3, 3))
+        tensor = special[k % 3] if k < 30 else (a @ a.T).tolist()     # then all six differ
+        angle = float(rng.uniform(-3.2, 3.2))
+        got = place(1.0, tensor, 0.0, angle, 0.0).inertia
+        with mp.workdps(50):
+            c, s = mp.cos(angle), mp.sin(angle)
+            turn = mp.matrix([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+            want = turn * mp.matrix(tensor) * turn.T
+            size = max(abs(v) for v in tensor[0] + tensor[1] + tensor[2])
+            for i in range(3):
+                for j in range(3):
+                    assert got[i, j] == float(want[i, j]) or \
+                        abs(got[i, j] - want[i, j]) <= 1e-30 * size, (angle, i, j)
