@@ -45,10 +45,12 @@ def test_each_turned_own_tensor_is_its_exact_value_rounded():
     rng = np.random.default_rng(8)
     special = [[[2.0, 0.5, 0.1], [0.5, 2.0, 0.2], [0.1, 0.2, 3.0]],    # I_xx = I_yy, I_xy
                [[1.0, 0.0, 0.1], [0.0, 2.0, 0.2], [0.1, 0.2, 3.0]],    # no I_xy
-               [[1.0, 0.3, 0.0], [0.3, 2.0, 0.0], [0.0, 0.0, 3.0]]]    # no I_xz, I_yz
-    for k in range(120):
+               [[1.0, 0.3, 0.0], [0.3, 2.0, 0.0], [0.0, 0.0, 3.0]],    # no I_xz, I_yz
+               [[1.0, 0.3, 0.2], [0.3, 2.0, 0.0], [0.2, 0.0, 3.0]],    # no I_yz
+               [[1.0, 0.3, 0.0], [0.3, 2.0, 0.2], [0.0, 0.2, 3.0]]]    # no I_xz
+    for k in range(60):
         a = rng.uniform(0.5, 2.0, (3, 3))
-        tensor = special[k % 3] if k < 30 else (a @ a.T).tolist()     # then all six differ
+        tensor = special[k % 5] if k < 30 else (a @ a.T).tolist()     # then all six differ
         angle = float(rng.uniform(-3.2, 3.2))
         got = place(1.0, tensor, 0.0, angle, 0.0).inertia
         with mp.workdps(50):
@@ -60,3 +62,22 @@ def test_each_turned_own_tensor_is_its_exact_value_rounded():
                 for j in range(3):
                     assert got[i, j] == float(want[i, j]) or \
                         abs(got[i, j] - want[i, j]) <= 1e-30 * size, (angle, i, j)
+
+
+def test_the_second_moments_of_full_precision_point_masses_are_rounded_once():
+    """
+    I_zz = m R^2 at any angle (x^2 + y^2 = R^2), and I_xx = m z^2 on the X axis (Fraction).
+
+    Masses, radii and heights of 53 significant bits: the products' low parts matter.
+    """
+    rng = np.random.default_rng(9)
+    for _ in range(40):
+        m, r, z = (float(v) for v in rng.uniform(0.1, 10.0, 3))
+        m_, r_, z_ = Fraction(m), Fraction(r), Fraction(z)
+        turned = place(m, None, r, float(rng.uniform(-3.2, 3.2)), z).inertia
+        assert turned[2, 2] == float(m_ * r_ * r_), (m, r, z)
+        on_x = place(m, None, r, 0.0, z)
+        assert on_x.inertia[0, 0] == float(m_ * z_ * z_)
+        assert on_x.inertia[1, 1] == float(m_ * (r_ * r_ + z_ * z_))
+        assert on_x.inertia[0, 2] == float(-m_ * r_ * z_)
+        assert on_x.first_moment.tolist() == [float(m_ * r_), 0.0, float(m_ * z_)]
