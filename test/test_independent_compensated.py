@@ -80,7 +80,7 @@ def test_power_of_two_above(value, want):
 def test_total_is_the_exact_sum_rounded_once_even_near_the_largest_float():
     """Where sigma = 2^64 of the bound would overflow the sum goes another way: also exact."""
     rng = np.random.default_rng(3)
-    for scale in (1.0, 1e-300, 1e290, 1e307):
+    for scale in (1.0, 1e-300, 1e290, 2.0 ** 1015, 1e307):    # 2^1015: sigma of 2^13 the bound
         hi = rng.normal(size=5000) * scale / 8
         hi[::2] = -hi[1::2] * (1 + 2.0 ** -40)           # pairs that nearly cancel
         lo = hi * 2.0 ** -60 * rng.uniform(-1, 1, hi.size)
@@ -123,8 +123,11 @@ def test_a_traced_program_with_every_operator_equals_numpy_directly():
     t.call(np.add, h, pair[1], out[0])
     wide = pair + g                  # (2, n) + (n,): two rows
     t.call(np.multiply, wide[1], 1.0, out[1])
-    with pytest.raises(TypeError, match='assign to a traced array with Tracer.call'):
-        pair[0] = g
+    other = t.external('other', 2)
+    for value in (g, other[0]):      # a new array; another array's row at the same place
+        with pytest.raises(TypeError) as refused:
+            pair[0] = value
+        assert str(refused.value) == 'assign to a traced array with Tracer.call'
     program = t.compile()
     # Temporaries that are dead are reused: never more rows than are live at once.
     assert program.total_rows == 3, program.total_rows
@@ -144,6 +147,7 @@ def test_the_tracers_views_and_bits():
     stack = t.external('stack', 3)
     assert stack[0].rows is None and stack[1:3].rows == 2 and stack[None].rows == 1
     assert stack[0:3:2].rows == 2 and stack[(slice(0, 2), 0)].rows == 2
+    assert stack[1:3].bits().rows == 2 and stack[1:3].bits().path == (slice(1, 3), 'int')
     bits = stack[2].bits()
     assert bits.path == (2, 'int') and bits.rows is None and bits.tracer is t
     ones = t.external('ones')
@@ -188,3 +192,65 @@ def test_cos_sin_of_more_than_a_block_is_each_angles_own():
         assert (c_hi[k], c_lo[k], s_hi[k], s_lo[k]) == (c1[0], c1_lo[0], s1[0], s1_lo[0]), k
     assert np.max(np.abs(c_hi - np.cos(angles))) <= 2.3e-16
     assert np.max(np.abs(s_hi - np.sin(angles))) <= 2.3e-16
+
+
+def significant_bits(value):
+    """Return the number of significant bits of a float (0 for 0)."""
+    numerator = abs(Fraction(float(value)).numerator)
+    while numerator and not numerator % 2:
+        numerator //= 2
+    return numerator.bit_length()
+
+
+def test_double_double_add_where_the_high_parts_cancel_is_exact_to_3_u_squared():
+    """
+    Keep the low parts' exact sum where the high parts cancel.
+
+    The add is Joldes, Muller and Popescu's AccurateDWPlusDW (2017), relative error at most
+    3 u^2 / (1 - 4 u), u = 2^-53, of the result itself, however much x and y cancel.
+    """
+    x, y = (1.0, 2.0 ** -60), (-1.0, 3.0 * 2.0 ** -115)     # 2^-60 + 3 2^-115: 56 bits
+    assert exact(*dd.add(x, y)) == Fraction(1, 2 ** 60) + Fraction(3, 2 ** 115)
+    rng = np.random.default_rng(6)
+    u = Fraction(1, 2 ** 53)
+    for x in double_doubles(rng, 300):       # y = (-x_hi, a normalised low part of its own)
+        y = (-x[0], x[0] * float(rng.uniform(-1, 1)) * 2.0 ** -float(rng.integers(54, 114)))
+        want = exact(*x) + exact(*y)
+        assert abs(exact(*dd.add(x, y)) - want) <= 3 * u * u / (1 - 4 * u) * abs(want), (x, y)
+
+
+def test_a_one_row_array_and_a_flat_one_make_one_row():
+    """(1, n) with (n,) gives (1, n), as numpy's broadcasting does, in one row."""
+    t = dd.Tracer()
+    x, one, out = t.external('x'), t.external('one', 1), t.external('out', 1)
+    total = one + x
+    assert total.rows == 1
+    t.call(np.copyto, out, total * x)
+    program = t.compile()
+    arrays = {'x': np.array([1.0, 2.0, -3.0]), 'one': np.array([[0.5, 0.25, 4.0]]),
+              'out': np.empty((1, 3))}
+    program.bind(3, arrays)()
+    assert arrays['out'].tolist() == [[1.5, 4.5, -3.0]]         # (0.5 + 1) 1, (0.25 + 2) 2, 1 (-3)
+
+
+def test_the_traced_split_and_two_product_are_exact():
+    """Halves of at most 26 significant bits adding up to the value; a b = p + e (Fraction)."""
+    t = dd.Tracer()
+    a, b = t.external('a'), t.external('b')
+    a_parts, b_parts = dd.trace_split(t, a), dd.trace_split(t, b)
+    p, e = dd.trace_two_prod(t, a, a_parts, b, b_parts)
+    names = ('hi', 'lo', 'p', 'e')
+    for name, ref in zip(names, (*a_parts, p, e)):
+        t.call(np.copyto, t.external(name), ref)
+    rng = np.random.default_rng(7)
+    n = 2000
+    arrays = {'a': rng.normal(size=n) * np.exp2(rng.integers(-300, 300, n)),
+              'b': rng.normal(size=n) * np.exp2(rng.integers(-300, 300, n)),
+              **{name: np.empty(n) for name in names}}
+    arrays['a'][:4] = [1.0, -3.0, 2.0 ** 27 - 1.0, 0.0]     # the last: 27 bits, rounded up
+    t.compile().bind(n, arrays)()
+    for k in range(n):
+        a_k, b_k, hi, lo, p_k, e_k = (float(arrays[name][k]) for name in ('a', 'b') + names)
+        assert Fraction(hi) + Fraction(lo) == Fraction(a_k), k
+        assert significant_bits(hi) <= 26 and significant_bits(lo) <= 26, (k, hi, lo)
+        assert p_k == a_k * b_k and Fraction(p_k) + Fraction(e_k) == Fraction(a_k) * Fraction(b_k)

@@ -17,7 +17,7 @@ import pytest
 
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.layout import DEFAULT_GRADE, LayoutError, parse_layout
+from cvc_balance.physics.layout import DEFAULT_GRADE, LayoutError, one_line, parse_layout
 
 
 def good():
@@ -330,3 +330,13 @@ def test_a_plain_component_is_refused_in_the_same_words(change, message):
     with pytest.raises(LayoutError) as error:
         parse_layout(layout)
     assert str(error.value) == message
+
+
+def test_one_line_joins_the_lines_and_cuts_at_the_limit():
+    """Any whitespace run is one space; past the limit the text is cut and its length said."""
+    assert one_line('a\n  b\tc ') == 'a b c'
+    assert one_line(ValueError('x\ny')) == 'x y'
+    words = 'word ' * 100                                     # 499 characters once joined
+    assert one_line(words, 20) == 'word word word word ... (499 characters)'
+    assert one_line('w' * 300) == 'w' * 300                   # the default limit: whole
+    assert one_line('w' * 301) == 'w' * 300 + '... (301 characters)'
