@@ -389,6 +389,7 @@ def test_the_simulated_histories_are_those_described(fleet):
     kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
     assert [p.machine_id for p in plans] == [f'gantry-000{i}' for i in range(1, MACHINES + 1)]
     assert [p.kind for p in plans] == [kinds[i % 4] for i in range(MACHINES)]
+    offsets = []             # minutes past 08:00 + 7 i: uniform over [0, 90)
     for i, plan in enumerate(plans):
         slips, swaps = plan.kind in kinds[0:3:2], plan.kind in kinds[1:3]
         assert (0.005 <= plan.slip_mm_per_day < 0.025) if slips else plan.slip_mm_per_day == 0
@@ -406,6 +407,7 @@ def test_the_simulated_histories_are_those_described(fleet):
         for k, run in enumerate(plan.runs):
             minutes = (run.when - first - timedelta(days=40 * k)).total_seconds() / 60
             assert 7 * i <= minutes < 7 * i + 90, (i, k, minutes)
+            offsets.append(minutes - 7 * i)
             name = run.when.strftime('%Y-%m-%dT%H%M%S')
             assert run.path.parent.name == plan.machine_id
             assert run.path.name == (name if k == 2 else f'{name}.mcap')
@@ -432,6 +434,8 @@ def test_the_simulated_histories_are_those_described(fleet):
             for name, moved in (('counterweight_rear', 'radius'), ('xray_tube', 'mass')):
                 want[name] = {k: v for k, v in want[name].items() if k != moved}
             assert true == want
+    # 24 draws spread over the 90 minutes (all within 45 of each other: odds 1.5e-6).
+    assert max(offsets) - min(offsets) > 45.0, offsets
 
 
 def test_each_simulated_run_is_the_check_described(fleet):
@@ -503,6 +507,32 @@ def test_a_layout_without_a_service_speed_or_planes_is_checked_at_23_27_rad_s(tm
     joints, cells, _ = messages(run.path)
     assert 23.27 <= max(w for _, w in joints) <= 23.27 + 5 * 0.005
     assert len(joints) == math.floor((2 * 23.27 / 12.0 + 0.2) * 20) + 1
+
+
+def test_the_layouts_service_speed_every_third_run_a_directory_and_a_seed_repeats(tmp_path):
+    """
+    Check a layout's own service speed, the runs' spacing and kinds, and the seed.
+
+    A service speed of 20 rad/s: each run's top speed 20 rad/s within 5 times its noise
+    (0.005 rad/s; 4 samples at the top at 20 samples/s);
+    six runs over half a day: every 0.1 day, the third and sixth as rosbag2 directories;
+    the same seed again: the same machine and the same first run's time.
+    """
+    layout = yaml.safe_load(LAYOUT.read_text())
+    layout['balancing']['service_speed'] = 20.0
+    (tmp_path / 'slow.yaml').write_text(yaml.safe_dump(layout))
+    options = dict(machines=1, days=0.5, rate=20.0, cell_rate=20.0, steady=0.2, seed=11)
+    (plan,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'runs', runs=6, **options)
+    first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
+    for k, run in enumerate(plan.runs):
+        minutes = (run.when - first - timedelta(days=0.1 * k)).total_seconds() / 60
+        assert 0.0 <= minutes < 90.0, (k, minutes)
+        assert run.path.is_dir() == (k % 3 == 2), k
+        joints, _, _ = messages(run.path)
+        assert abs(max(w for _, w in joints) - 20.0) <= 5 * 0.005
+        assert len(joints) == math.floor((2 * 20.0 / 12.0 + 0.2) * 20) + 1
+    (again,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'again', runs=1, **options)
+    assert again.as_built == plan.as_built and again.runs[0].when == plan.runs[0].when
 
 
 # -- the simulation's parts by themselves (pure: no bag written) ------------------------------

@@ -81,10 +81,10 @@ def test_a_state_file_read_back_or_refused_in_its_words(tmp_path):
     bad = (f"{path}: support 'front': give bearing and revolutions, damage, seconds "
            '(finite, >= 0)')
     good = {'bearing': bearing, 'revolutions': 1.0, 'damage': 1.0, 'seconds': 1.0}
-    for entry in (3, {**good, 'bearing': 'ball'}, {k: v for k, v in good.items()
-                                                  if k != 'revolutions'},
-                  {**good, 'damage': True}, {**good, 'seconds': -1e-300},
-                  {**good, 'revolutions': '1'}, {**good, 'damage': None}):
+    missing = {k: v for k, v in good.items() if k != 'revolutions'}
+    for entry in (3, {**good, 'bearing': 'ball'}, missing, {**good, 'damage': True},
+                  {**good, 'seconds': -1e-300}, {**good, 'revolutions': '1'},
+                  {**good, 'damage': None}):
         path.write_text(json.dumps({'kind': KIND, 'supports': {'front': entry}}))
         with pytest.raises(ValueError) as caught:
             read_state(path)
@@ -181,7 +181,6 @@ def test_counts_go_on_from_the_state_file_and_across_layouts(tmp_path):
         'spare': {'bearing': {'C': 1.0}, 'revolutions': 7.0, 'damage': 6.0, 'seconds': 5.0}})
     said, log = logged()
     life = BearingLife(path, log)
-    level, message, values = None, None, None
     life.layout(SUPPORTS)
     assert said == [('warning', 'bearing life: support rear: the state file holds another '
                                 'bearing: counted from 0')]
