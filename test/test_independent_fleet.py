@@ -552,7 +552,7 @@ def test_each_kind_of_machine_has_its_history_by_hand():
     rng = np.random.default_rng(3)
     kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
     for i in range(8):
-        plan = _machine(i, rng, first, 200.0, layout, 'counterweight_rear')
+        plan = _machine(i, rng, first, 200.0, layout)
         assert (plan.machine_id, plan.kind, plan.runs) == (f'gantry-{i + 1:04d}', kinds[i % 4],
                                                            [])
         if plan.kind in kinds[0:3:2]:
@@ -568,7 +568,7 @@ def test_each_kind_of_machine_has_its_history_by_hand():
         assert -0.12 <= plan.as_built['z'] <= 0.12 and 0 <= plan.as_built['angle_deg'] <= 360
     bare = dict(layout, balancing={})                      # no planes: -+0.12 m
     for i in range(4):
-        assert -0.12 <= _machine(i, rng, first, 10.0, bare, 'x').as_built['z'] <= 0.12
+        assert -0.12 <= _machine(i, rng, first, 10.0, bare).as_built['z'] <= 0.12
 
 
 def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
