@@ -281,3 +281,18 @@ def test_the_fleet_chart_shows_the_30_most_urgent_by_default(tmp_path):
     figure = _last_figure(tmp_path / 'fleet.png', trends)
     assert [t.get_text() for t in figure.axes[0].get_yticklabels()] == \
         [f'm{k:02d}' for k in range(30)]
+
+
+def test_a_layout_change_a_plane_cannot_fit_is_drawn_without_a_step(tmp_path):
+    """A plane of two runs (too few for a drift): the change's line, and no step said."""
+    data = series()
+    data['amount_II'] = np.where(np.isin(DAYS, (0.0, 101.0)), 400.0, np.nan)
+    data['permissible_II'] = SHARE
+    trend = fit_machine('m', data)
+    assert [p.plane for p in trend.planes] == ['I', 'II']
+    assert not np.isfinite(trend.changes[0].steps['II'][0])          # the premise
+    first, second = machine_chart(trend, tmp_path / 'm.png').axes
+    assert [t.get_text()[:15] for t in first.texts] == ['layout change: ']
+    assert len(second.texts) == 0
+    (change,) = [ln for ln in second.get_lines() if ln.get_linestyle() == '--']
+    assert abs(change.get_xdata()[0] - date2num(day(52.0))) < 1e-9
