@@ -296,3 +296,16 @@ def test_a_layout_change_a_plane_cannot_fit_is_drawn_without_a_step(tmp_path):
     assert len(second.texts) == 0
     (change,) = [ln for ln in second.get_lines() if ln.get_linestyle() == '--']
     assert abs(change.get_xdata()[0] - date2num(day(52.0))) < 1e-9
+
+
+def test_a_machine_without_a_plane_gets_its_chart_saying_so(tmp_path):
+    """No plane in any run (``cvc-balance fleet`` draws every machine): one panel, in words."""
+    empty = fit_machine('none', series(np.full(len(DAYS), np.nan)))
+    assert empty.planes == []                                   # the premise
+    figure = machine_chart(empty, tmp_path / 'none.png')
+    assert (tmp_path / 'none.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert figure._suptitle.get_text() == 'none: TOO FEW RUNS   (layout gantry b, G 6.3, ' \
+        '12 runs)'
+    (ax,) = figure.axes
+    assert [t.get_text() for t in ax.texts] == ['no correction plane to chart: its runs gave '
+                                                'no plane unbalance']
