@@ -209,7 +209,13 @@ def test_status_values_as_text():
         ['1.23457', '2', '1e-07', '3', 'x', 'True', 'None', 'inf']
 
 
-def test_the_help_lists_every_topic_and_parameter_and_starts_nothing(capsys):
+def test_the_help_lists_every_topic_and_parameter_and_starts_nothing(capsys, monkeypatch):
+    import cvc_balance.ros.balance_monitor as monitor
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError('ROS started')
+    for name in ('init', 'spin', 'BalanceMonitor'):       # none of them may be reached
+        monkeypatch.setattr(monitor, name, forbidden)
     text = usage()
     lines = text.split('\n')
     assert lines[0] == ('usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] '
