@@ -424,7 +424,7 @@ def test_the_simulated_histories_are_those_described(fleet):
             assert declared == want
             assert {k: v for k, v in run.declared.items() if k != 'components'} == \
                 {k: v for k, v in layout.items() if k != 'components'}
-            true = {c['name']: c for c in run.true_components}
+            true = {c['name']: dict(c) for c in run.true_components}   # popped below
             assert true.pop('as_built') == built
             elapsed = (run.when - first).total_seconds() / 86400
             slipped = want['counterweight_rear']['radius'] + plan.slip_mm_per_day * 1e-3 * elapsed

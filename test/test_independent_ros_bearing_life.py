@@ -59,6 +59,7 @@ def test_the_state_file_is_named_for_the_machine_beside_the_recording(tmp_path, 
     assert state_path('a.mcap', '..') == tmp_path / 'bearing_life_node.json'
     assert state_path('a.mcap', '._m é_.') == tmp_path / 'bearing_life_m.json'
     assert state_path('a.mcap', 'a  b') == tmp_path / 'bearing_life_a_b.json'
+    assert state_path('a.mcap', 'X-ray X') == tmp_path / 'bearing_life_X-ray_X.json'
     assert state_path('a.mcap', '') == tmp_path / 'bearing_life_node.json'
 
 
@@ -236,6 +237,7 @@ def test_another_bearing_on_a_support_is_counted_from_zero(tmp_path):
     life.counting.add_sample(4.0, 4 * TWO_PI, TWO_PI, LOADS)
     life.counting.add_sample(5.0, 5 * TWO_PI, TWO_PI, LOADS)
     _, message, values = life.status(0.0)
+    assert values['front hours of running since start'] == pytest.approx(1.0 / 3600.0)
     # The first sample has no step.
     assert values['front revolutions since start'] == pytest.approx(1.0, rel=1e-12)
     assert values['front life used in all'] == pytest.approx(1.0 / 1e6)   # P = C
@@ -286,3 +288,45 @@ def test_a_state_file_not_written_is_said(tmp_path):
     life.layout([Support('front', 0.0)])                     # nothing to keep: not written
     life.save()
     assert not (tmp_path / 'unused.json').exists()
+
+
+def test_an_unreadable_state_file_is_said_kept_and_the_count_goes_on_in_memory(tmp_path):
+    path = tmp_path / 'state.json'
+    path.write_text('[1, 2]')
+    said, log = logged()
+    life = BearingLife(path, log)
+    problem = ("state file unreadable, not written over (counted from 0 since start): "
+               f"{path}: not a bearing life state file (kind '{KIND}')")
+    assert said == [('error', f'bearing life: {problem}')] and life.problem == problem
+    life.layout(SUPPORTS[:1])
+    turns(life, 1)
+    life.save()
+    assert path.read_text() == '[1, 2]' and sorted(os.listdir(tmp_path)) == ['state.json']
+    _, _, values = life.status(0.0)
+    assert values['state file'] == problem
+    assert values['front revolutions since start'] == pytest.approx(1.0)
+
+
+def test_supports_in_any_order_and_added_later_are_all_counted_and_kept(tmp_path):
+    """A support without a bearing first; one support, then two: both counted, both saved."""
+    path = tmp_path / 'state.json'
+    life = BearingLife(path)
+    life.layout([SUPPORTS[2], SUPPORTS[0]])
+    assert set(life.counting.counters) == {'front'}
+    life.counting.add_sample(0.0, 0.0, TWO_PI, LOADS)
+    life.counting.add_sample(0.5, math.pi, TWO_PI, LOADS)        # half a turn in 0.5 s
+    _, _, values = life.status(0.0)
+    assert values['front life used per hour of running'] == pytest.approx(
+        0.5 * FRONT_RATE / 1e6 / (0.5 / 3600.0), rel=1e-12)
+    life.layout(SUPPORTS[:2])
+    assert set(life.counting.counters) == {'front', 'rear'}
+    # A new bearing has no last load: the step across the change is not counted.
+    life.counting.add_sample(1.0, TWO_PI, TWO_PI, LOADS)
+    life.counting.add_sample(1.5, 3 * math.pi, TWO_PI, LOADS)
+    life.save()                                   # the samples since the status counted too
+    data = json.loads(path.read_text())
+    assert data['saved_utc'].endswith('Z') and '+00:00' not in data['saved_utc']
+    assert set(data['supports']) == {'front', 'rear'}
+    assert data['supports']['front']['revolutions'] == pytest.approx(1.0, rel=1e-12)
+    assert data['supports']['front']['seconds'] == 1.0
+    assert data['supports']['rear']['revolutions'] == pytest.approx(0.5, rel=1e-12)

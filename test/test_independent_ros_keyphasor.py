@@ -11,7 +11,7 @@ speed 2 pi / T; TimeReference marks each giving 64 samples of the revolution the
 
 import math
 import struct
-from time import time_ns
+from time import monotonic, time_ns
 from types import SimpleNamespace
 
 from rclpy.serialization import serialize_message
@@ -31,6 +31,7 @@ class Node:
         self.timers, self.destroyed, self.subscriptions, self.logs = [], [], [], []
         self.processed, self.rejected, self.throttled, self.publishers = [], [], [], []
         self.now = 0
+        self.publishing = '/ns/tach'                    # the topic the publishers are on
         self.sim_time = sim_time
         if recorder is not None:
             self._recorder = recorder
@@ -53,7 +54,8 @@ class Node:
         return SimpleNamespace(value=self.sim_time)
 
     def get_publishers_info_by_topic(self, topic):
-        return [SimpleNamespace(topic_type=kind) for kind in self.publishers]
+        return [SimpleNamespace(topic_type=kind) for kind in self.publishers
+                if topic == self.publishing]
 
     def create_subscription(self, msg_type, topic, callback, qos, raw):
         self.subscriptions.append((msg_type, topic, callback, qos, raw))
@@ -177,6 +179,9 @@ def test_a_sampled_tach_gives_each_samples_angle_and_speed_by_hand():
     node = Node()
     tach = KeyphasorInput(node, '/tach', 'rising', 0.5, 'qos')
     omega = 2 * math.pi / 0.1
+    resolutions, mark = [], tach.marks.mark
+    tach.marks.mark = lambda time, resolution: resolutions.append(resolution) or mark(
+        time, resolution)
     for j in range(1000):
         tach.float64(float64((j % 100 + 0.5) / 100.0), ORIGIN + j * 1_000_000, j + 0.5)
     assert node.rejected == \
@@ -193,6 +198,8 @@ def test_a_sampled_tach_gives_each_samples_angle_and_speed_by_hand():
         assert abs(angle - omega * (j - mark) / 1000.0) < 1e-6, (j, angle)
         assert abs(speed - omega) < 1e-6 * omega
     marks = tach.marks
+    # Each mark judged with the tach's resolution, its sample spacing.
+    assert len(resolutions) == 7 and all(abs(r - 1e-3) < 1e-12 for r in resolutions)
     assert (marks.found, marks.revolutions) == (7, 6)
     assert abs(marks.period - 0.1) < 1e-9
     assert tach.values()['keyphasor period [s]'] == marks.period
@@ -259,3 +266,26 @@ def test_a_missed_and_a_doubled_mark_are_said_when_the_counts_change():
     assert tach.values()['keyphasor doubled (dropped)'] == 1
     # Every revolution between the first and the last mark, each once: 9 x 64 samples.
     assert len(node.processed) == 9 * 64
+
+
+def test_samples_and_marks_as_they_arrive_are_stamped_and_timed_by_the_clocks():
+    """The node's clock stamps a sample; each processed sample is as late as it arrived."""
+    node = Node(sim_time=True)
+    tach = KeyphasorInput(node, '/tach', 'rising', 0.5, 'qos')
+    before = monotonic()
+    for j in range(700):
+        node.now = ORIGIN + j * 1_000_000
+        tach._on_float64(float64((j % 100 + 0.5) / 100.0))
+    after = monotonic()
+    assert len(node.processed) == 45                      # from 0.655 s on (see above)
+    assert all(before <= received <= after for *_, received in node.processed)
+    assert node.processed[0][:2] == divmod(ORIGIN + 655 * 1_000_000, 10**9)
+    node = Node(sim_time=True)
+    tach = KeyphasorInput(node, '/mark', 'rising', None, 'qos')
+    before = monotonic()
+    for k in range(5):
+        tach._on_time_reference(time_reference(ORIGIN + k * 250_000_000))
+    after = monotonic()
+    assert len(node.processed) == 4 * 64
+    # Each sample as late as its revolution's mark came: at most 1 s before it arrived.
+    assert all(before - 1.0 <= received <= after for *_, received in node.processed)
