@@ -61,8 +61,8 @@ def wrench(sec, nanosec, force, torque=(0.0, 0.0, 0.0)):
     return bytes(serialize_message(message))
 
 
-def true_layout():
-    true = copy.deepcopy(GANTRY)
+def true_layout(base=GANTRY):
+    true = copy.deepcopy(base)
     true['components'].append(dict(HIDDEN))
     return true
 
@@ -78,17 +78,23 @@ def planes_by_hand(components, planes):
     return out
 
 
-def run(cells, turns, torque=(0.0, 0.0, 0.0)):
-    """Turn at OMEGA for ``turns`` revolutions: each sample's motion, then both cells."""
-    rotor = PinocchioRotor(true_layout())
+def run(cells, turns, base=GANTRY, read=None):
+    """
+    Turn at OMEGA for ``turns`` revolutions: each sample's motion, then every cell.
+
+    Each cell reads its support's force and moment (a single support's moment about it);
+    ``read``: the samples the cells read (default all).
+    """
+    rotor = PinocchioRotor(true_layout(base))
     steps = int(turns * 2 * math.pi / OMEGA * RATE)
     for j in range(steps + 1):
         ns = round(j * 1e9 / RATE)
         sec, nanosec = ORIGIN_S + ns // 10**9, ns % 10**9
         angle = OMEGA * j / RATE
         cells.motion(sec, nanosec, math.remainder(angle, 2 * math.pi), OMEGA, 0.0)
-        for name, (force, _) in rotor.loads(angle, OMEGA, 0.0)['supports'].items():
-            cells._on_reading(name, wrench(sec, nanosec, force, torque))
+        if read is None or j < read:
+            for name, (force, moment) in rotor.loads(angle, OMEGA, 0.0)['supports'].items():
+                cells._on_reading(name, wrench(sec, nanosec, force, moment))
     return steps
 
 
@@ -135,7 +141,7 @@ def test_readings_counted_dropped_or_left_out():
                       'cell readings dropped': 3}
 
 
-def expected_wrenches():
+def expected_wrenches(base=GANTRY):
     """
     Return the identified and residual wrenches by Pinocchio, about the layout's centre.
 
@@ -144,14 +150,14 @@ def expected_wrenches():
     (Pinocchio's about its centre of mass, moved by the parallel-axis rule: P_O = P_c +
     m c_x c_z), less z_declared m c_xy.
     """
-    mass, com, inertia = PinocchioRotor(true_layout()).mass_properties()
-    _, declared_com, _ = PinocchioRotor(GANTRY).mass_properties()
+    mass, com, inertia = PinocchioRotor(true_layout(base)).mass_properties()
+    _, declared_com, _ = PinocchioRotor(base).mass_properties()
     p_xz = -inertia[0, 2] + mass * com[0] * com[2] - declared_com[2] * mass * com[0]
     p_yz = -inertia[1, 2] + mass * com[1] * com[2] - declared_com[2] * mass * com[1]
     w2 = OMEGA ** 2
     force = np.array([w2 * mass * com[0], w2 * mass * com[1], 0.0])
     torque = np.array([-w2 * p_yz, w2 * p_xz, 0.0])
-    declared_force, declared_torque = PinocchioRotor(GANTRY).unbalance(OMEGA)
+    declared_force, declared_torque = PinocchioRotor(base).unbalance(OMEGA)
     return (force, torque), (force - declared_force, torque - declared_torque)
 
 
@@ -241,3 +247,67 @@ def test_the_cells_status_says_the_measured_rotor_and_what_its_layout_misses():
             abs(off) / share, rel=1e-6)
     assert abs(missed[0]) * 1e6 == pytest.approx(4000.0) and \
         abs(missed[1]) * 1e6 == pytest.approx(44000.0)
+
+
+def test_a_single_supports_cell_moment_is_fitted_too():
+    """One support (its cell reads the moment about it): the couple is identified too."""
+    one = copy.deepcopy(GANTRY)
+    one['supports'] = [{'name': 'hub', 'z': 0.0, 'axial': True}]
+    model = RotorModel.from_layout(parse_layout(one))
+    emitted = []
+    cells = LoadCells(Node(), model, 2, 'qos', lambda *args: emitted.append(args))
+    run(cells, 1.2, one)
+    identified, missed = expected_wrenches(one)
+    ((_, _, _, force, torque), (_, _, _, off_force, off_torque)) = emitted
+    scale = np.abs(identified[0]).max()
+    assert np.allclose(force, identified[0], rtol=0, atol=1e-7 * scale)
+    assert np.allclose(torque, identified[1], rtol=0, atol=1e-7 * scale)
+    assert np.allclose(off_torque, missed[1], rtol=0, atol=1e-7 * scale)
+    assert np.linalg.norm(missed[1]) > 0.5                   # the hidden mass's couple
+
+
+def test_nothing_is_fitted_before_a_whole_revolution_or_from_readings_that_cannot_tell():
+    model = RotorModel.from_layout(parse_layout(GANTRY))
+    emitted = []
+    cells = LoadCells(Node(), model, 2, 'qos', lambda *args: emitted.append(args))
+    steps = run(cells, 0.9)
+    estimate = cells.estimate
+    assert cells.found is None and emitted == []
+    assert (estimate.identifiable, estimate.readings) == (False, 2 * (steps + 1))
+    # One reading a cell (4 real numbers for 8 unknowns): a revolution gives a fit that
+    # cannot tell; the status says why, nothing is published.
+    cells = LoadCells(Node(), model, 2, 'qos', lambda *args: emitted.append(args))
+    run(cells, 1.1, read=1)
+    assert cells.found is not None and not cells.estimate.identifiable and emitted == []
+    of_record = verdict_of_record(model, cells.estimate, OMEGA)
+    assert of_record.measured is None
+    level, message, values = cells.diagnose(of_record)
+    assert (level, message) == (assessment.NOT_JUDGED, of_record.reason)
+    assert values == {'cell front readings': 1, 'cell rear readings': 1,
+                      'cell readings dropped': 0}
+
+
+def test_the_status_says_why_the_measurement_is_not_yet_the_verdict_and_what_disagrees():
+    model = RotorModel.from_layout(parse_layout(GANTRY))
+    cells = LoadCells(Node(), model, 2, 'qos', lambda *args: None)
+    run(cells, 1.1)
+    # The residual plane II (29 % of its share) over a 1 % warning: a disagreement.
+    of_record = verdict_of_record(model, cells.estimate, OMEGA, residual_warn=0.01)
+    assert of_record.source == 'measured' and of_record.disagreements
+    level, message, _ = cells.diagnose(of_record)
+    assert (level, of_record.measured.level) == (assessment.WARN, assessment.OK)
+    assert message == f'measured: {of_record.measured.text}; {of_record.disagreement_text}'
+    # No service speed and the rotor not turned: the layout's verdict stands, said why.
+    plain = copy.deepcopy(GANTRY)
+    del plain['balancing']['service_speed']
+    model = RotorModel.from_layout(parse_layout(plain))
+    cells = LoadCells(Node(), model, 2, 'qos', lambda *args: None)
+    run(cells, 1.1, plain)
+    of_record = verdict_of_record(model, cells.estimate, 0.0)
+    assert of_record.source == 'layout' and of_record.measured.assessment is None
+    level, message, values = cells.diagnose(of_record)
+    assert level == of_record.measured.level
+    assert message == (f'measured: {of_record.measured.text} (not yet the verdict of record: '
+                       'no service speed and the rotor has not turned)')
+    assert 'residual plane I / permissible' not in values
+    assert values['residual plane II [g mm]'] == pytest.approx(44000.0, rel=1e-6)
