@@ -57,7 +57,13 @@ class Node:
     def create_subscription(self, msg_type, name, callback, qos, raw):
         assert raw is True
         self.subscriptions[name] = (msg_type, callback, qos)
-        return ('subscription', name)
+        return SimpleNamespace(name=name, get_publisher_count=lambda: self.publishers.get(
+            name, 0))
+
+    publishers = {}
+
+    def destroy_node(self):
+        self.destroyed = True
 
 
 def read(path):
@@ -110,7 +116,7 @@ def test_the_default_topics_subscribed_with_the_qos_their_publishers_offer(tmp_p
         assert qos.depth == 1000
         assert qos.reliability == (BEST_EFFORT if best_effort else RELIABLE), name
         assert qos.durability == (LATCHED if latched else VOLATILE), name
-        assert recorder.subscription(name) == ('subscription', name)
+        assert recorder.subscription(name).name == name
     assert recorder.subscription('/ns/other') is None
     assert recorder.counts == dict.fromkeys(expected, 0)
     (timer,) = node.timers
@@ -138,9 +144,11 @@ def test_the_default_topics_subscribed_with_the_qos_their_publishers_offer(tmp_p
     node.subscriptions['/ns/speed'][1](b'speed two')
     own = recorder.add('keyphasor', 'std_msgs/msg/Float64')
     own(7_000, b'mark')
+    own(7_500, b'mark two')
     recorder.write('layout', 8_000, b'layout text')
-    assert recorder.counts['/ns/speed'] == 2 and recorder.counts['/ns/keyphasor'] == 1
-    assert recorder.counts['/ns/layout'] == 1
+    recorder.write('/ns/layout', 8_500, b'layout two')
+    assert recorder.counts['/ns/speed'] == 2 and recorder.counts['/ns/keyphasor'] == 2
+    assert recorder.counts['/ns/layout'] == 2
     recorder.close()
     assert timer.cancelled
     topics, metadata, compressions = read(tmp_path / 'run.mcap')
@@ -152,8 +160,8 @@ def test_the_default_topics_subscribed_with_the_qos_their_publishers_offer(tmp_p
                                                               [(6_000, b'cell one')])
     assert topics['/ns/speed'][3] == [(5_000, b'speed one'), (6_000, b'speed two')]
     assert topics['/ns/keyphasor'] == ('std_msgs/msg/Float64', False, False,
-                                       [(7_000, b'mark')])
-    assert topics['/ns/layout'][3] == [(8_000, b'layout text')]
+                                       [(7_000, b'mark'), (7_500, b'mark two')])
+    assert topics['/ns/layout'][3] == [(8_000, b'layout text'), (8_500, b'layout two')]
     assert metadata['machine_id'] == 'gantry-7' and metadata['run'] == 'check'
 
 
@@ -186,3 +194,67 @@ def test_given_topics_and_patterns_an_absolute_pattern_and_no_compression(tmp_pa
     with pytest.raises(BagError):
         BagRecorder(Node(), tmp_path / 'run.mcap', DEFAULT_TOPICS)
     assert (tmp_path / 'run.mcap').read_bytes() == before
+
+
+def test_the_record_command_records_until_stopped_and_says_what_it_wrote(
+        tmp_path, monkeypatch, capsys):
+    """
+    Run ``cvc-balance record`` with rclpy's start, node and spin stood in for.
+
+    Ready once every topic named in ``ready_when`` has a publisher (checked every 0.05 s);
+    the bag finalised, the node destroyed and rclpy shut down after spinning; one line of
+    counts per topic.
+    """
+    import rclpy
+    from cvc_balance.ros import recorder as module
+    node, started, shut = Node(), [], []
+
+    def spin(spun):
+        assert spun is node
+        ((period, check),) = [(t.period, t.callback) for t in node.timers
+                              if t.period != 0.2]
+        assert period == 0.05
+        check()                                   # no publisher yet: not ready
+        node.publishers = {'/ns/speed': 1}
+        check()                                   # one of two: not ready
+        print('checked', flush=True)
+        node.publishers = {'/ns/speed': 1, '/ns/layout': 2}
+        check()
+        node.subscriptions['/ns/speed'][1](b'one')
+        node.subscriptions['/ns/speed'][1](b'two')
+        node.subscriptions['/ns/layout'][1](b'text')
+    monkeypatch.setattr(module, 'init', lambda args: started.append(args))
+    monkeypatch.setattr(module, 'spin', spin)
+    monkeypatch.setattr(rclpy, 'create_node', lambda name: started.append(name) or node)
+    monkeypatch.setattr(rclpy, 'try_shutdown', lambda: shut.append(True))
+    args = SimpleNamespace(ros_args=['-r', '__ns:=/ns'], output=str(tmp_path / 'r.mcap'),
+                           topics=['speed', 'layout', 'other/*'], compression='none',
+                           chunk_kib=1, machine_id='gantry-9', run_label=RunLabel('trim'),
+                           ready_when=['speed', 'layout'])
+    assert module.record_main(args) == 0
+    assert started == [['cvc_balance_record', '--ros-args', '-r', '__ns:=/ns'],
+                       'cvc_balance_recorder']
+    assert node.destroyed and shut == [True]
+    assert all(t.cancelled for t in node.timers)
+    assert capsys.readouterr().out == (f'checked\nready\n{tmp_path / "r.mcap"}: 3 messages: '
+                                       '/ns/layout 1, /ns/speed 2\n')
+    topics, metadata, compressions = read(tmp_path / 'r.mcap')
+    assert set(topics) == {'/ns/speed', '/ns/layout'} and compressions == {''}
+    assert topics['/ns/speed'][3] == [(1_000, b'one'), (1_000, b'two')]
+    assert (metadata['machine_id'], metadata['run']) == ('gantry-9', 'trim')
+    # The default topics, zstd, no readiness asked: spun at once.
+    node = Node()
+    monkeypatch.setattr(module, 'spin', lambda spun: None)
+    args = SimpleNamespace(ros_args=[], output=str(tmp_path / 'd.mcap'), topics=None,
+                           compression='zstd', chunk_kib=1024, machine_id=None,
+                           run_label=None, ready_when=None)
+    assert module.record_main(args) == 0
+    assert set(node.subscriptions) == {
+        '/ns/joint_states', '/ns/speed', '/ns/layout', '/ns/bearing_load', '/ns/unbalance',
+        '/ns/drive_torque', '/ns/identified_unbalance', '/ns/unbalance_residual',
+        '/diagnostics'}
+    assert [t.period for t in node.timers] == [0.2]
+    out = capsys.readouterr().out
+    assert out.startswith(f'{tmp_path / "d.mcap"}: 0 messages: /diagnostics 0, ')
+    topics, metadata, compressions = read(tmp_path / 'd.mcap')
+    assert metadata.get('machine_id') is None and compressions <= {'zstd'}
