@@ -218,8 +218,18 @@ def test_the_help_lists_every_topic_and_parameter_and_starts_nothing(capsys, mon
         monkeypatch.setattr(monitor, name, forbidden)
     text = usage()
     lines = text.split('\n')
-    assert lines[0] == ('usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] '
-                        '[--params-file FILE] [-r FROM:=TO] ...]')
+    assert lines[:10] == [
+        'usage: balance-monitor [-h] [--ros-args [-p NAME:=VALUE] [--params-file FILE] '
+        '[-r FROM:=TO] ...]',
+        '',
+        'ROS 2 node balance_monitor: bearing loads, drive torque and unbalance of a rotor',
+        'from its encoder (joint_states or speed) or tach (keyphasor_topic) and its',
+        'component layout, with the ISO 21940-11 verdict on /diagnostics. Runs until',
+        'SIGINT or SIGTERM. Topic names are relative: -r __ns:=/gantry1 puts them under',
+        '/gantry1, -r joint_states:=/x remaps one. <name>: each support of the layout in',
+        'force.',
+        '',
+        'inputs:']
     inputs, outputs, parameters = (lines.index('inputs:'), lines.index('outputs:'),
                                    lines.index('parameters (-p NAME:=VALUE after --ros-args, '
                                                'or --params-file FILE: config/balance_'
@@ -249,3 +259,45 @@ def test_the_help_lists_every_topic_and_parameter_and_starts_nothing(capsys, mon
                                        'see --help)\n')
     assert main(['balance_monitor', 'x']) == 2
     assert "unexpected argument 'x'" in capsys.readouterr().err
+
+
+def test_the_node_started_after_ros_spun_and_shut_down_or_refused_in_words(
+        monkeypatch, capsys):
+    """With rclpy's start, the node and the spin loop stood in for: each step and its words."""
+    import sys
+    import cvc_balance.ros.balance_monitor as monitor
+    done = []
+    node = type('Node', (), {'lost_message': lambda self, error: None,
+                             'destroy_node': lambda self: done.append('destroyed')})()
+    monkeypatch.setattr(monitor, 'init', lambda args: done.append(('init', args)))
+    monkeypatch.setattr(monitor, 'BalanceMonitor', lambda: node)
+    monkeypatch.setattr(monitor, 'spin', lambda spun, on_error: done.append(
+        ('spin', spun, on_error)))
+    monkeypatch.setattr(monitor.rclpy, 'try_shutdown', lambda: done.append('shut down'))
+    monkeypatch.setattr(sys, 'setswitchinterval', lambda s: done.append(('interval', s)))
+    argv = ['balance_monitor', '--ros-args', '-p', 'x:=1']
+    assert main(argv) == 0
+    assert done == [('init', argv), ('interval', 0.0005), ('spin', node, node.lost_message),
+                    'destroyed', 'shut down']
+    assert capsys.readouterr() == ('', '')
+    # The process's own arguments when none are given.
+    done.clear()
+    monkeypatch.setattr(sys, 'argv', ['balance_monitor', '--ros-args'])
+    assert main() == 0 and done[0] == ('init', ['balance_monitor', '--ros-args'])
+    # Bad ROS arguments, and a node that cannot start: exit 2 and one line.
+    done.clear()
+
+    def bad_arguments(args):
+        raise ValueError('unknown ROS argument -q')
+    monkeypatch.setattr(monitor, 'init', bad_arguments)
+    assert main(argv) == 2 and done == []
+    assert capsys.readouterr() == ('', 'balance_monitor: error: bad ROS arguments: unknown ROS '
+                                       'argument -q (see --help)\n')
+    monkeypatch.setattr(monitor, 'init', lambda args: None)
+
+    def refused():
+        raise OSError('record_path: its folder does not exist')
+    monkeypatch.setattr(monitor, 'BalanceMonitor', refused)
+    assert main(argv) == 2 and done == [('interval', 0.0005), 'shut down']
+    assert capsys.readouterr() == ('', 'balance_monitor: error: record_path: its folder does '
+                                       'not exist\n')
