@@ -544,15 +544,25 @@ def test_each_kind_of_machine_has_its_history_by_hand():
     Machine i's kind is KINDS[i % 4]; a slip (mm/day) in [0.005, 0.025) only for a slipping
     counterweight (and both), a swap 0.35 to 0.65 of the span after the first run and a
     tube 0.2 to 0.6 kg heavier than declared only with a tube swap (and both); the as-built
-    mass 20 to 100 g at 0.6 m between the planes; its id gantry-NNNN from 1.
+    mass 20 to 100 g at 0.6 m between the planes, at an angle of 0 to 360 degrees (to 0.01
+    degree, z to 0.1 mm); its id gantry-NNNN from 1. Over 40 machines the draws spread
+    over their ranges (the swaps past 0.6 of the span, the angles past 300 degrees).
     """
     from cvc_balance.fleet.simulate import _machine
     layout = yaml.safe_load(LAYOUT.read_text())
     first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
     rng = np.random.default_rng(3)
     kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
-    for i in range(8):
+    swaps, angles, heights = [], [], []
+    for i in range(40):
         plan = _machine(i, rng, first, 200.0, layout)
+        built = plan.as_built
+        angles.append(built['angle_deg'])
+        heights.append(built['z'])
+        assert round(built['angle_deg'], 2) == built['angle_deg'] and \
+            round(built['z'], 4) == built['z']
+        if plan.swap is not None:
+            swaps.append((plan.swap - first).total_seconds() / 86400 / 200.0)
         assert (plan.machine_id, plan.kind, plan.runs) == (f'gantry-{i + 1:04d}', kinds[i % 4],
                                                            [])
         if plan.kind in kinds[0:3:2]:
@@ -566,9 +576,15 @@ def test_each_kind_of_machine_has_its_history_by_hand():
             assert (plan.swap, plan.tube_extra_kg) == (None, 0.0)
         assert 0.02 <= plan.as_built['mass'] <= 0.1 and plan.as_built['radius'] == 0.6
         assert -0.12 <= plan.as_built['z'] <= 0.12 and 0 <= plan.as_built['angle_deg'] <= 360
+    assert 0.6 < max(swaps) < 0.65 and 0.35 <= min(swaps) < 0.4
+    assert 300.0 < max(angles) <= 360.0 and min(angles) < 60.0
+    assert sum(a != int(a) for a in angles) > 30 and sum(z != 0.0 for z in heights) > 30
     bare = dict(layout, balancing={})                      # no planes: -+0.12 m
-    for i in range(4):
-        assert -0.12 <= _machine(i, rng, first, 10.0, bare).as_built['z'] <= 0.12
+    heights = [_machine(i, rng, first, 10.0, bare).as_built['z'] for i in range(40)]
+    assert -0.12 <= min(heights) < -0.06 and 0.06 < max(heights) <= 0.12
+    wide = dict(layout, balancing=dict(layout['balancing'], planes=[-0.3, 0.5]))
+    heights = [_machine(i, rng, first, 10.0, wide).as_built['z'] for i in range(40)]
+    assert -0.3 <= min(heights) < -0.2 and 0.4 < max(heights) <= 0.5
 
 
 def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
@@ -623,3 +639,47 @@ def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
     assert hidden[0] == {'at': 0.0, 'add': built}
     assert sorted((h['set']['component'], sorted(h['set'])) for h in hidden[1:]) == [
         ('counterweight_rear', ['component', 'radius']), ('xray_tube', ['component', 'mass'])]
+
+
+def test_a_swap_at_a_runs_very_time_and_tubes_described_otherwise_by_hand():
+    """
+    Check the swap's correction for tubes given otherwise, and the hidden changes exactly.
+
+    A run exactly at the swap is after it; the correction opposite a tube given in radians
+    (30 degrees: at 210), in degrees, or with no angle (at 180) and no z (at 0); the new
+    tube's declared mass to the microgram (60.1234567 + 0.5 kg: 60.623457); the true tube's
+    extra 0.3 kg set at the start of the run as the only hidden change besides the as-built
+    mass; a layout without supports: cells without biases.
+    """
+    import copy
+    from cvc_balance.fleet.simulate import _scenario, _state, MachinePlan
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, tzinfo=timezone.utc)
+    swap = first + timedelta(days=50)
+    built = {'name': 'as_built', 'mass': 0.05, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.0}
+    plan = MachinePlan('m', 'tube swap', 0.0, swap, 0.3, built)
+    declared, _ = _state(layout, plan, swap, first, 'counterweight_rear', 'xray_tube')
+    assert 'tube_swap_correction' in {c['name'] for c in declared['components']}
+    for tube, mass, opposite, z in (
+            ({'mass': 60.1234567, 'radius': 0.62, 'angle': math.pi / 6}, 60.623457, 210.0, 0.0),
+            ({'mass': 60.0, 'radius': 0.62, 'angle_deg': 30.0, 'z': 0.05}, 60.5, 210.0, 0.05),
+            ({'mass': 60.0, 'radius': 0.62}, 60.5, 180.0, 0.0)):
+        other = copy.deepcopy(layout)
+        other['components'] = [c for c in other['components'] if c['name'] != 'xray_tube'] + \
+            [dict(tube, name='xray_tube')]
+        declared, true = _state(other, plan, swap + timedelta(days=1), first,
+                                'counterweight_rear', 'xray_tube')
+        parts = {c['name']: c for c in declared['components']}
+        assert parts['xray_tube']['mass'] == mass
+        correction = parts['tube_swap_correction']
+        assert abs(correction.pop('angle_deg') - opposite) < 1e-12
+        assert correction == {'name': 'tube_swap_correction', 'mass': 0.5, 'radius': 0.62,
+                              'z': z}
+        spec = _scenario(plan, declared, true, swap, 50.0, 40.0, 20.0, 7, 2.5)
+        assert spec['hidden'] == [
+            {'at': 0.0, 'add': built},
+            {'at': 0.0, 'set': {'component': 'xray_tube', 'mass': mass + 0.3}}]
+    bare = dict(declared, supports=[])
+    del bare['supports']
+    spec = _scenario(plan, bare, true, swap, 50.0, 40.0, 20.0, 7, 2.5)
+    assert spec['load_cells']['bias'] == {}
