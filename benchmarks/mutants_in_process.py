@@ -14,7 +14,11 @@ order (``STATS_FILE``: mutmut's ``mutmut-stats.json``, to run only the tests tha
 the mutated function, fastest first, as mutmut does) until one fails: killed, or
 ``timeout`` past ``MUTANT_LIMIT`` s of CPU time in one test (default 10), else
 survived. One line a mutant in ``RESULTS_FILE``: name, status, the test, seconds. The
-clean code runs first and must pass. ``RESET_CACHES``: empty the traced programs before
+clean code runs first and must pass. A mutant's tests share their module fixtures (torn
+down after its last test), so a fixture made with the mutant serves every test that reads
+it, not only the first (mutmut's stats credit a module fixture's calls to the first test
+that made it: give no ``STATS_FILE`` to run the whole selection, in the order given, for
+each mutant). ``RESET_CACHES``: empty the traced programs before
 each mutant (see fresh_programs.py). Module state a mutant leaves behind is not undone:
 for modules with caches, set RESET_CACHES or use mutmut.
 """
@@ -73,10 +77,11 @@ def pytest_runtestloop(session):
                 _reset_caches()
             chosen = _chosen(session.items, stats, mutant)
             status, by, started = ('survived' if chosen else 'no tests'), '', time.monotonic()
-            for item in chosen:
+            for index, item in enumerate(chosen):
+                following = chosen[index + 1] if index + 1 < len(chosen) else None
                 signal.setitimer(signal.ITIMER_VIRTUAL, LIMIT)
                 try:
-                    reports = runtestprotocol(item, nextitem=None, log=False)
+                    reports = runtestprotocol(item, nextitem=following, log=False)
                 except TimeOut:
                     status, by = 'timeout', item.nodeid
                     session._setupstate.teardown_exact(None)
@@ -85,6 +90,7 @@ def pytest_runtestloop(session):
                     signal.setitimer(signal.ITIMER_VIRTUAL, 0)
                 if any(report.failed for report in reports):
                     status, by = 'killed', item.nodeid
+                    session._setupstate.teardown_exact(None)
                     break
             if not mutant:
                 assert status == 'survived', f'the clean code fails {by}'

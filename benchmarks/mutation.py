@@ -113,6 +113,20 @@ MODULES = {
     # The node's pure parts: in this process (the node itself runs in another).
     'ros_input_checks': ('cvc_balance/ros/input_checks.py',
                          ['test/test_independent_input_checks.py']),
+    'ros_bearing_life': ('cvc_balance/ros/bearing_life.py',
+                         ['test/test_independent_ros_bearing_life.py']),
+    'ros_keyphasor_input': ('cvc_balance/ros/keyphasor_input.py',
+                            ['test/test_independent_ros_keyphasor.py']),
+    'ros_load_cells': ('cvc_balance/ros/load_cells.py',
+                       ['test/test_independent_ros_load_cells.py']),
+    'ros_recorder': ('cvc_balance/ros/recorder.py', ['test/test_independent_ros_recorder.py']),
+    'ros_qos': ('cvc_balance/ros/qos.py', ['test/test_independent_ros_node_parts.py']),
+    'ros_executor': ('cvc_balance/ros/executor.py', ['test/test_independent_ros_node_parts.py']),
+    # Of the node itself only its module-level functions (prepare_layout, recording_label,
+    # _text, usage, main's refusals): --mutants '*balance_monitor.x_*'; the node's methods
+    # run in node processes (docs/mutation.md).
+    'ros_balance_monitor': ('cvc_balance/ros/balance_monitor.py',
+                            ['test/test_independent_ros_node_parts.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
                     'simulate', 'charts')},

@@ -205,7 +205,7 @@ def test_the_fleet_chart_ranks_the_machines_to_their_dates(tmp_path):
     assert [t.get_text() for t in two.axes[0].get_yticklabels()] == ['out', 'leaving']
 
 
-def _last_figure(path, trends, most=30):
+def _last_figure(path, trends, **options):
     """Draw the fleet chart again and keep its Figure (fleet_chart returns none)."""
     from matplotlib.figure import Figure
     made = []
@@ -216,7 +216,7 @@ def _last_figure(path, trends, most=30):
         return real(self, *args, **kwargs)
     Figure.savefig = keep
     try:
-        fleet_chart(trends, path, most=most)
+        fleet_chart(trends, path, **options)
     finally:
         Figure.savefig = real
     return made[-1]
@@ -251,3 +251,61 @@ def test_the_fleet_chart_of_a_date_with_no_latest_end(tmp_path):
     empty = fit_machine('none', series(np.full(len(DAYS), np.nan)))
     figure = _last_figure(tmp_path / 'e.png', [empty])
     assert [t.get_text() for t in figure.axes[0].texts] == [' TOO FEW RUNS']
+
+
+def test_the_legend_names_each_mark_and_the_layouts_runs_are_drawn_where_they_are(tmp_path):
+    """The legend's words; hollow dots at the layout's runs' days, none when all measured."""
+    x, s2, inverse, t, line, half = by_hand()
+    figure = machine_chart(fit_machine('m', series()), tmp_path / 'm.png')
+    (ax,) = figure.axes
+    label = f'drift {x[2]:+.0f} +- {t * math.sqrt(s2 * inverse[2, 2]):.0f} g mm/day'
+    assert sorted(text.get_text() for text in ax.get_legend().get_texts()) == sorted([
+        'identified (load cells), 95 %', "layout's", 'permissible (G 6.3)', label])
+    (hollow,) = [ln for ln in ax.get_lines() if ln.get_label() == "layout's"]
+    assert np.allclose([to_days(v) for v in hollow.get_xdata()], DAYS[~MEASURED], atol=1e-9)
+    assert hollow.get_marker() == 'o' and hollow.get_linestyle() == 'None'
+    assert to_hex(hollow.get_color()) == BLUE
+    every = series()
+    every['identified_I'] = np.ones(len(DAYS), bool)
+    every['ci95_I'] = np.full(len(DAYS), 20.0)
+    figure = machine_chart(fit_machine('m', every), tmp_path / 'all.png')
+    labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
+    assert "layout's" not in labels and 'identified (load cells), 95 %' in labels
+    assert not [ln for ln in figure.axes[0].get_lines() if ln.get_label() == "layout's"]
+
+
+def test_the_fleet_chart_shows_the_30_most_urgent_by_default(tmp_path):
+    from dataclasses import replace
+    calm = fit_machine('calm', series(500.0 + NOISE, np.full(len(DAYS), 1200.0)))
+    trends = [replace(calm, machine_id=f'm{k:02d}') for k in range(31)]
+    figure = _last_figure(tmp_path / 'fleet.png', trends)
+    assert [t.get_text() for t in figure.axes[0].get_yticklabels()] == \
+        [f'm{k:02d}' for k in range(30)]
+
+
+def test_a_layout_change_a_plane_cannot_fit_is_drawn_without_a_step(tmp_path):
+    """A plane of two runs (too few for a drift): the change's line, and no step said."""
+    data = series()
+    data['amount_II'] = np.where(np.isin(DAYS, (0.0, 101.0)), 400.0, np.nan)
+    data['permissible_II'] = SHARE
+    trend = fit_machine('m', data)
+    assert [p.plane for p in trend.planes] == ['I', 'II']
+    assert not np.isfinite(trend.changes[0].steps['II'][0])          # the premise
+    first, second = machine_chart(trend, tmp_path / 'm.png').axes
+    assert [t.get_text()[:15] for t in first.texts] == ['layout change: ']
+    assert len(second.texts) == 0
+    (change,) = [ln for ln in second.get_lines() if ln.get_linestyle() == '--']
+    assert abs(change.get_xdata()[0] - date2num(day(52.0))) < 1e-9
+
+
+def test_a_machine_without_a_plane_gets_its_chart_saying_so(tmp_path):
+    """No plane in any run (``cvc-balance fleet`` draws every machine): one panel, in words."""
+    empty = fit_machine('none', series(np.full(len(DAYS), np.nan)))
+    assert empty.planes == []                                   # the premise
+    figure = machine_chart(empty, tmp_path / 'none.png')
+    assert (tmp_path / 'none.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert figure._suptitle.get_text() == 'none: TOO FEW RUNS   (layout gantry b, G 6.3, ' \
+        '12 runs)'
+    (ax,) = figure.axes
+    assert [t.get_text() for t in ax.texts] == ['no correction plane to chart: its runs gave '
+                                                'no plane unbalance']

@@ -389,6 +389,7 @@ def test_the_simulated_histories_are_those_described(fleet):
     kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
     assert [p.machine_id for p in plans] == [f'gantry-000{i}' for i in range(1, MACHINES + 1)]
     assert [p.kind for p in plans] == [kinds[i % 4] for i in range(MACHINES)]
+    offsets = []             # minutes past 08:00 + 7 i: uniform over [0, 90)
     for i, plan in enumerate(plans):
         slips, swaps = plan.kind in kinds[0:3:2], plan.kind in kinds[1:3]
         assert (0.005 <= plan.slip_mm_per_day < 0.025) if slips else plan.slip_mm_per_day == 0
@@ -406,6 +407,7 @@ def test_the_simulated_histories_are_those_described(fleet):
         for k, run in enumerate(plan.runs):
             minutes = (run.when - first - timedelta(days=40 * k)).total_seconds() / 60
             assert 7 * i <= minutes < 7 * i + 90, (i, k, minutes)
+            offsets.append(minutes - 7 * i)
             name = run.when.strftime('%Y-%m-%dT%H%M%S')
             assert run.path.parent.name == plan.machine_id
             assert run.path.name == (name if k == 2 else f'{name}.mcap')
@@ -422,7 +424,7 @@ def test_the_simulated_histories_are_those_described(fleet):
             assert declared == want
             assert {k: v for k, v in run.declared.items() if k != 'components'} == \
                 {k: v for k, v in layout.items() if k != 'components'}
-            true = {c['name']: c for c in run.true_components}
+            true = {c['name']: dict(c) for c in run.true_components}   # popped below
             assert true.pop('as_built') == built
             elapsed = (run.when - first).total_seconds() / 86400
             slipped = want['counterweight_rear']['radius'] + plan.slip_mm_per_day * 1e-3 * elapsed
@@ -432,6 +434,8 @@ def test_the_simulated_histories_are_those_described(fleet):
             for name, moved in (('counterweight_rear', 'radius'), ('xray_tube', 'mass')):
                 want[name] = {k: v for k, v in want[name].items() if k != moved}
             assert true == want
+    # 24 draws spread over the 90 minutes (all within 45 of each other: odds 1.5e-6).
+    assert max(offsets) - min(offsets) > 45.0, offsets
 
 
 def test_each_simulated_run_is_the_check_described(fleet):
@@ -505,6 +509,32 @@ def test_a_layout_without_a_service_speed_or_planes_is_checked_at_23_27_rad_s(tm
     assert len(joints) == math.floor((2 * 23.27 / 12.0 + 0.2) * 20) + 1
 
 
+def test_the_layouts_service_speed_every_third_run_a_directory_and_a_seed_repeats(tmp_path):
+    """
+    Check a layout's own service speed, the runs' spacing and kinds, and the seed.
+
+    A service speed of 20 rad/s: each run's top speed 20 rad/s within 5 times its noise
+    (0.005 rad/s; 4 samples at the top at 20 samples/s);
+    six runs over half a day: every 0.1 day, the third and sixth as rosbag2 directories;
+    the same seed again: the same machine and the same first run's time.
+    """
+    layout = yaml.safe_load(LAYOUT.read_text())
+    layout['balancing']['service_speed'] = 20.0
+    (tmp_path / 'slow.yaml').write_text(yaml.safe_dump(layout))
+    options = dict(machines=1, days=0.5, rate=20.0, cell_rate=20.0, steady=0.2, seed=11)
+    (plan,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'runs', runs=6, **options)
+    first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
+    for k, run in enumerate(plan.runs):
+        minutes = (run.when - first - timedelta(days=0.1 * k)).total_seconds() / 60
+        assert 0.0 <= minutes < 90.0, (k, minutes)
+        assert run.path.is_dir() == (k % 3 == 2), k
+        joints, _, _ = messages(run.path)
+        assert abs(max(w for _, w in joints) - 20.0) <= 5 * 0.005
+        assert len(joints) == math.floor((2 * 20.0 / 12.0 + 0.2) * 20) + 1
+    (again,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'again', runs=1, **options)
+    assert again.as_built == plan.as_built and again.runs[0].when == plan.runs[0].when
+
+
 # -- the simulation's parts by themselves (pure: no bag written) ------------------------------
 
 def test_each_kind_of_machine_has_its_history_by_hand():
@@ -514,15 +544,25 @@ def test_each_kind_of_machine_has_its_history_by_hand():
     Machine i's kind is KINDS[i % 4]; a slip (mm/day) in [0.005, 0.025) only for a slipping
     counterweight (and both), a swap 0.35 to 0.65 of the span after the first run and a
     tube 0.2 to 0.6 kg heavier than declared only with a tube swap (and both); the as-built
-    mass 20 to 100 g at 0.6 m between the planes; its id gantry-NNNN from 1.
+    mass 20 to 100 g at 0.6 m between the planes, at an angle of 0 to 360 degrees (to 0.01
+    degree, z to 0.1 mm); its id gantry-NNNN from 1. Over 40 machines the draws spread
+    over their ranges (the swaps past 0.6 of the span, the angles past 300 degrees).
     """
     from cvc_balance.fleet.simulate import _machine
     layout = yaml.safe_load(LAYOUT.read_text())
     first = datetime(2026, 1, 5, 8, 0, tzinfo=timezone.utc)
     rng = np.random.default_rng(3)
     kinds = ['slipping counterweight', 'tube swap', 'both', 'steady']
-    for i in range(8):
-        plan = _machine(i, rng, first, 200.0, layout, 'counterweight_rear')
+    swaps, angles, heights = [], [], []
+    for i in range(40):
+        plan = _machine(i, rng, first, 200.0, layout)
+        built = plan.as_built
+        angles.append(built['angle_deg'])
+        heights.append(built['z'])
+        assert round(built['angle_deg'], 2) == built['angle_deg'] and \
+            round(built['z'], 4) == built['z']
+        if plan.swap is not None:
+            swaps.append((plan.swap - first).total_seconds() / 86400 / 200.0)
         assert (plan.machine_id, plan.kind, plan.runs) == (f'gantry-{i + 1:04d}', kinds[i % 4],
                                                            [])
         if plan.kind in kinds[0:3:2]:
@@ -536,9 +576,15 @@ def test_each_kind_of_machine_has_its_history_by_hand():
             assert (plan.swap, plan.tube_extra_kg) == (None, 0.0)
         assert 0.02 <= plan.as_built['mass'] <= 0.1 and plan.as_built['radius'] == 0.6
         assert -0.12 <= plan.as_built['z'] <= 0.12 and 0 <= plan.as_built['angle_deg'] <= 360
+    assert 0.6 < max(swaps) < 0.65 and 0.35 <= min(swaps) < 0.4
+    assert 300.0 < max(angles) <= 360.0 and min(angles) < 60.0
+    assert sum(a != int(a) for a in angles) > 30 and sum(z != 0.0 for z in heights) > 30
     bare = dict(layout, balancing={})                      # no planes: -+0.12 m
-    for i in range(4):
-        assert -0.12 <= _machine(i, rng, first, 10.0, bare, 'x').as_built['z'] <= 0.12
+    heights = [_machine(i, rng, first, 10.0, bare).as_built['z'] for i in range(40)]
+    assert -0.12 <= min(heights) < -0.06 and 0.06 < max(heights) <= 0.12
+    wide = dict(layout, balancing=dict(layout['balancing'], planes=[-0.3, 0.5]))
+    heights = [_machine(i, rng, first, 10.0, wide).as_built['z'] for i in range(40)]
+    assert -0.3 <= min(heights) < -0.2 and 0.4 < max(heights) <= 0.5
 
 
 def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
@@ -593,3 +639,47 @@ def test_a_machines_declared_and_true_layouts_and_its_runs_scenario_by_hand():
     assert hidden[0] == {'at': 0.0, 'add': built}
     assert sorted((h['set']['component'], sorted(h['set'])) for h in hidden[1:]) == [
         ('counterweight_rear', ['component', 'radius']), ('xray_tube', ['component', 'mass'])]
+
+
+def test_a_swap_at_a_runs_very_time_and_tubes_described_otherwise_by_hand():
+    """
+    Check the swap's correction for tubes given otherwise, and the hidden changes exactly.
+
+    A run exactly at the swap is after it; the correction opposite a tube given in radians
+    (30 degrees: at 210), in degrees, or with no angle (at 180) and no z (at 0); the new
+    tube's declared mass to the microgram (60.1234567 + 0.5 kg: 60.623457); the true tube's
+    extra 0.3 kg set at the start of the run as the only hidden change besides the as-built
+    mass; a layout without supports: cells without biases.
+    """
+    import copy
+    from cvc_balance.fleet.simulate import _scenario, _state, MachinePlan
+    layout = yaml.safe_load(LAYOUT.read_text())
+    first = datetime(2026, 1, 5, tzinfo=timezone.utc)
+    swap = first + timedelta(days=50)
+    built = {'name': 'as_built', 'mass': 0.05, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.0}
+    plan = MachinePlan('m', 'tube swap', 0.0, swap, 0.3, built)
+    declared, _ = _state(layout, plan, swap, first, 'counterweight_rear', 'xray_tube')
+    assert 'tube_swap_correction' in {c['name'] for c in declared['components']}
+    for tube, mass, opposite, z in (
+            ({'mass': 60.1234567, 'radius': 0.62, 'angle': math.pi / 6}, 60.623457, 210.0, 0.0),
+            ({'mass': 60.0, 'radius': 0.62, 'angle_deg': 30.0, 'z': 0.05}, 60.5, 210.0, 0.05),
+            ({'mass': 60.0, 'radius': 0.62}, 60.5, 180.0, 0.0)):
+        other = copy.deepcopy(layout)
+        other['components'] = [c for c in other['components'] if c['name'] != 'xray_tube'] + \
+            [dict(tube, name='xray_tube')]
+        declared, true = _state(other, plan, swap + timedelta(days=1), first,
+                                'counterweight_rear', 'xray_tube')
+        parts = {c['name']: c for c in declared['components']}
+        assert parts['xray_tube']['mass'] == mass
+        correction = parts['tube_swap_correction']
+        assert abs(correction.pop('angle_deg') - opposite) < 1e-12
+        assert correction == {'name': 'tube_swap_correction', 'mass': 0.5, 'radius': 0.62,
+                              'z': z}
+        spec = _scenario(plan, declared, true, swap, 50.0, 40.0, 20.0, 7, 2.5)
+        assert spec['hidden'] == [
+            {'at': 0.0, 'add': built},
+            {'at': 0.0, 'set': {'component': 'xray_tube', 'mass': mass + 0.3}}]
+    bare = dict(declared, supports=[])
+    del bare['supports']
+    spec = _scenario(plan, bare, true, swap, 50.0, 40.0, 20.0, 7, 2.5)
+    assert spec['load_cells']['bias'] == {}

@@ -44,10 +44,14 @@ def machine_chart(trend, path):
         title += f' {trend.leaves:%Y-%m-%d}'
     figure.suptitle(f'{title}   (layout {trend.layout}, G {trend.grade:g}, {trend.runs} runs)',
                     fontsize=11)
-    axes = figure.subplots(len(planes), 1, sharex=True, squeeze=False)[:, 0]
+    axes = figure.subplots(max(len(planes), 1), 1, sharex=True, squeeze=False)[:, 0]
     end = max(_end(plane) for plane in planes) if planes else 0
     for ax, plane in zip(axes, planes):
         _plane(ax, plane, trend, end)
+    if not planes:                  # every machine gets its chart: this one says why it is empty
+        axes[0].set_axis_off()
+        axes[0].text(0.5, 0.5, 'no correction plane to chart: its runs gave no plane unbalance',
+                     ha='center', va='center', transform=axes[0].transAxes)
     locator = AutoDateLocator()
     axes[-1].xaxis.set_major_locator(locator)
     axes[-1].xaxis.set_major_formatter(ConciseDateFormatter(locator))

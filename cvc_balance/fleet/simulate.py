@@ -93,7 +93,7 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
     plans = []
     with tempfile.TemporaryDirectory() as scratch:
         for i in range(machines):
-            plan = _machine(i, rng, first, days, layout, counterweight)
+            plan = _machine(i, rng, first, days, layout)
             plans.append(plan)
             spacing = days / max(runs - 1, 1)
             for k in range(runs):
@@ -114,7 +114,7 @@ def simulate_fleet(layout_path, directory, machines=20, runs=5, days=180.0,
     return plans
 
 
-def _machine(i, rng, first, days, layout, counterweight):
+def _machine(i, rng, first, days, layout):
     kind = KINDS[i % len(KINDS)]
     slip = float(rng.uniform(0.005, 0.025)) if kind in ('slipping counterweight', 'both') \
         else 0.0

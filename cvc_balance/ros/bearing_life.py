@@ -57,8 +57,10 @@ def read_state(path):
         return {}
     try:
         data = read_document(path, MAX_STATE_BYTES)
-    except (DocumentError, OSError) as error:
-        raise ValueError(f'{path}: {error}') from None
+    except DocumentError as error:      # it names the path
+        raise ValueError(str(error)) from None
+    except OSError as error:
+        raise ValueError(f'{path}: {error.strerror or error}') from None
     if not isinstance(data, dict) or data.get('kind') != KIND or \
             not isinstance(data.get('supports'), dict):
         raise ValueError(f"{path}: not a bearing life state file (kind '{KIND}')")
