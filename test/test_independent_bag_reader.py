@@ -1442,3 +1442,72 @@ def test_metadata_bytes_split_message_indexes_and_a_record_too_short_for_a_messa
     assert bag.chunks[0].indexes[1].tolist() == [entries[1], entries[3]] == [0, 41]
     assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(whole)
     assert len(read_before_the_cut(whole)) == 2
+
+
+@pytest.mark.parametrize('last', ['channel', 'metadata'])
+def test_a_damaged_length_of_the_record_ending_the_file(last, tmp_path):
+    """
+    Read by its fields a Channel or Metadata record that ends the file, its length damaged.
+
+    A recording cut right after that record, whose length field says 1 MiB more: its own
+    fields give its length, which ends exactly at the file's end; read by them (the topic,
+    or the metadata and its bytes as written), said, and the recording said cut.
+    """
+    from mcap.records import Channel, Header, Metadata, Schema
+    if last == 'channel':
+        final = built(Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                              metadata={'k': 'v'}))
+    else:
+        final = built(Metadata(name='m', metadata={'k': 'v'}))
+    start = MAGIC + built(Header(profile='ros2', library='by hand'),
+                          Schema(id=1, name=STRING, encoding='ros2msg', data=b''))
+    data = bytearray(start + final)
+    at, length = len(start), len(final) - 9
+    struct.pack_into('<Q', data, at + 1, length + (1 << 20))
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    if last == 'channel':
+        assert bag.topics() == {'/n': STRING}
+    else:
+        assert bag.metadata == [(at, 'm', {'k': 'v'}, final)]
+    assert bag.problems == [f'record (opcode 0x{final[0]:02x}) at byte {at} runs past the end '
+                            f'of the file: its length field ({length + (1 << 20)}) is damaged, '
+                            f'its fields give {length}: read by them',
+                            'file has no end of data (truncated recording?)']
+
+
+def test_a_schema_found_in_a_later_chunk_than_the_first_opened(tmp_path):
+    """
+    Look for a channel's schema chunk by chunk until it is found, not only in the first.
+
+    The summary repeats the channel (id 40000, beyond 2^15), not its schema; the schema is
+    in the second chunk only. Both chunks' messages by their message indexes, as the mcap
+    library's stream reader reads them, and the channel's type from that schema.
+    """
+    import zlib
+    from mcap.records import (Channel, Chunk, DataEnd, Footer, Header, MessageIndex,
+                              Schema)
+    channel = Channel(id=40000, schema_id=1, topic='/n', message_encoding='cdr', metadata={})
+    out = MAGIC + built(Header(profile='ros2', library='by hand'))
+    for chunk, (first, extra) in enumerate((((1, 'a'), b''),
+                                            ((2, 'b'), built(Schema(id=1, name=STRING,
+                                                                    encoding='ros2msg',
+                                                                    data=b''))))):
+        records = (built(channel) if chunk == 0 else b'') + extra
+        offset = len(records)
+        records += built(string_record(40000, *first))
+        out += built(Chunk(message_start_time=first[0], message_end_time=first[0],
+                           uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
+                           compression='', data=records))
+        out += built(MessageIndex(channel_id=40000, records=[(first[0], offset)]))
+    out += built(DataEnd(data_section_crc=0))
+    summary = len(out)
+    out += built(channel, Footer(summary_start=summary, summary_offset_start=0,
+                                 summary_crc=0)) + MAGIC
+    path = tmp_path / 'late.mcap'
+    path.write_bytes(out)
+    bag = Bag(path)
+    assert bag.problems == [] and bag.topics() == {'/n': STRING}
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(out)
+    assert len(read_before_the_cut(out)) == 2
