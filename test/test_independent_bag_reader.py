@@ -1511,3 +1511,50 @@ def test_a_schema_found_in_a_later_chunk_than_the_first_opened(tmp_path):
     assert bag.problems == [] and bag.topics() == {'/n': STRING}
     assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(out)
     assert len(read_before_the_cut(out)) == 2
+
+
+def test_message_indexes_pointing_at_records_that_are_not_whole_messages(tmp_path):
+    """
+    Trust a message index only where it points at whole messages of its channel.
+
+    Three chunks, each indexed entry by entry by hand: a message and one of no data at all
+    (22 bytes, the shortest, ending the chunk): both read, nothing said; a message and a
+    record of a message's opcode one byte too short for one (21 bytes), then a message; a
+    message and one whose length field says a byte more than its chunk holds: those two
+    chunks walked (said), their whole messages read.
+    """
+    import zlib
+    from mcap.records import (Channel, Chunk, DataEnd, Footer, Header, Message,
+                              MessageIndex, Schema)
+    out = MAGIC + built(Header(profile='ros2', library='by hand'),
+                        Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                        Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                                metadata={}))
+    first = built(string_record(1, 1, 'a'))
+    empty = built(Message(channel_id=1, sequence=0, log_time=2, publish_time=2, data=b''))
+    short = record(0x05, struct.pack('<HIQ', 1, 0, 3) + bytes(7))
+    over = bytearray(built(string_record(1, 4, 'd')))
+    struct.pack_into('<Q', over, 1, len(over) - 9 + 1)
+    chunks = []
+    after = built(string_record(1, 5, 'e'))          # so the short record does not end it
+    for second in (empty, short + after, bytes(over)):
+        records = first + second
+        chunks.append(len(out))
+        out += built(Chunk(message_start_time=1, message_end_time=4,
+                           uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
+                           compression='', data=records))
+        out += built(MessageIndex(channel_id=1, records=[(1, 0), (2, len(first))]))
+    out += built(DataEnd(data_section_crc=0), Footer(summary_start=0, summary_offset_start=0,
+                                                     summary_crc=0)) + MAGIC
+    path = tmp_path / 'indexes.mcap'
+    path.write_bytes(out)
+    bag = Bag(path)
+    a = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='a'), STRING).tobytes()
+    e = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='e'), STRING).tobytes()
+    assert bag.messages(bag.channel('/n', STRING)) == [(1, a), (2, b''), (1, a), (5, e), (1, a)]
+    walked = [f'chunk at byte {at}: message index of /n does not point at its messages; chunk '
+              'walked instead' for at in chunks[1:]]
+    assert len(first) == len(over) == 41
+    assert bag.problems == walked + [f"chunk at byte {chunks[2]}: a record runs past the "
+                                     "chunk's end at byte 41 of its 82; the rest of the chunk "
+                                     'skipped']
