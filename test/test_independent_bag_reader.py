@@ -1373,13 +1373,14 @@ def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
     assert bag.message_count(bag.channel('/n', STRING)) == len(read_before_the_cut(full)) == 3
 
 
-@pytest.mark.parametrize('damaged', ['message index', 'metadata'])
+@pytest.mark.parametrize('damaged', ['message index', 'metadata', 'metadata value'])
 def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
     """
     Skip a message index whose entries, or a metadata record whose map, overrun the record.
 
     The first chunk's message index says 16 bytes more of entries than it holds, or a
-    metadata record before the chunks says its map is a byte longer: said in the words for
+    metadata record before the chunks says its map, or the value in its map, is a byte
+    longer (the map ends with the record: the value would end past both): said in the words for
     that record (bytes by hand), the walk going on at the next chunk; every message read,
     as the mcap library's stream reader reads the undamaged file (an index only locates
     messages: that chunk is walked).
@@ -1387,15 +1388,16 @@ def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
     from mcap.records import Metadata
     whole = hand_built_file([{1: [(1, 'a'), (2, 'b')]}, {1: [(5, 'c')]}])
     chunks = [o for o, op, _ in top_level(whole) if op == 0x06]
-    if damaged == 'metadata':
+    if damaged.startswith('metadata'):
         whole = whole[:chunks[0]] + built(Metadata(name='m', metadata={'k': 'v'})) + \
             whole[chunks[0]:]
     records = top_level(whole)
     data = bytearray(whole)
-    following = [o for o, op, _ in records if op == 0x06][1 if damaged != 'metadata' else 0]
-    if damaged == 'metadata':
+    following = [o for o, op, _ in records if op == 0x06][0 if 'metadata' in damaged else 1]
+    if damaged.startswith('metadata'):
         at = next(o for o, op, _ in records if op == 0x0C)
-        field, why = at + 9 + 4 + 1, 'map beyond the record'
+        field, why = ((at + 9 + 4 + 1, 'map beyond the record') if damaged == 'metadata' else
+                      (at + 9 + 4 + 1 + 4 + 4 + 1, 'string beyond the record'))
         struct.pack_into('<I', data, field, struct.unpack_from('<I', data, field)[0] + 1)
     else:
         at = next(o for o, op, _ in records if op == 0x07)
