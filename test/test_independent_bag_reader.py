@@ -1373,13 +1373,14 @@ def test_what_a_bag_keeps_of_its_records_for_a_rewrite(tmp_path):
     assert bag.message_count(bag.channel('/n', STRING)) == len(read_before_the_cut(full)) == 3
 
 
-@pytest.mark.parametrize('damaged', ['message index', 'metadata'])
+@pytest.mark.parametrize('damaged', ['message index', 'metadata', 'metadata value'])
 def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
     """
     Skip a message index whose entries, or a metadata record whose map, overrun the record.
 
     The first chunk's message index says 16 bytes more of entries than it holds, or a
-    metadata record before the chunks says its map is a byte longer: said in the words for
+    metadata record before the chunks says its map, or the value in its map, is a byte
+    longer (the map ends with the record: the value would end past both): said in the words for
     that record (bytes by hand), the walk going on at the next chunk; every message read,
     as the mcap library's stream reader reads the undamaged file (an index only locates
     messages: that chunk is walked).
@@ -1387,15 +1388,16 @@ def test_an_index_or_metadata_record_whose_fields_overrun_it(damaged, tmp_path):
     from mcap.records import Metadata
     whole = hand_built_file([{1: [(1, 'a'), (2, 'b')]}, {1: [(5, 'c')]}])
     chunks = [o for o, op, _ in top_level(whole) if op == 0x06]
-    if damaged == 'metadata':
+    if damaged.startswith('metadata'):
         whole = whole[:chunks[0]] + built(Metadata(name='m', metadata={'k': 'v'})) + \
             whole[chunks[0]:]
     records = top_level(whole)
     data = bytearray(whole)
-    following = [o for o, op, _ in records if op == 0x06][1 if damaged != 'metadata' else 0]
-    if damaged == 'metadata':
+    following = [o for o, op, _ in records if op == 0x06][0 if 'metadata' in damaged else 1]
+    if damaged.startswith('metadata'):
         at = next(o for o, op, _ in records if op == 0x0C)
-        field, why = at + 9 + 4 + 1, 'map beyond the record'
+        field, why = ((at + 9 + 4 + 1, 'map beyond the record') if damaged == 'metadata' else
+                      (at + 9 + 4 + 1 + 4 + 4 + 1, 'string beyond the record'))
         struct.pack_into('<I', data, field, struct.unpack_from('<I', data, field)[0] + 1)
     else:
         at = next(o for o, op, _ in records if op == 0x07)
@@ -1442,3 +1444,119 @@ def test_metadata_bytes_split_message_indexes_and_a_record_too_short_for_a_messa
     assert bag.chunks[0].indexes[1].tolist() == [entries[1], entries[3]] == [0, 41]
     assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(whole)
     assert len(read_before_the_cut(whole)) == 2
+
+
+@pytest.mark.parametrize('last', ['channel', 'metadata'])
+def test_a_damaged_length_of_the_record_ending_the_file(last, tmp_path):
+    """
+    Read by its fields a Channel or Metadata record that ends the file, its length damaged.
+
+    A recording cut right after that record, whose length field says 1 MiB more: its own
+    fields give its length, which ends exactly at the file's end; read by them (the topic,
+    or the metadata and its bytes as written), said, and the recording said cut.
+    """
+    from mcap.records import Channel, Header, Metadata, Schema
+    if last == 'channel':
+        final = built(Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                              metadata={'k': 'v'}))
+    else:
+        final = built(Metadata(name='m', metadata={'k': 'v'}))
+    start = MAGIC + built(Header(profile='ros2', library='by hand'),
+                          Schema(id=1, name=STRING, encoding='ros2msg', data=b''))
+    data = bytearray(start + final)
+    at, length = len(start), len(final) - 9
+    struct.pack_into('<Q', data, at + 1, length + (1 << 20))
+    path = tmp_path / 'cut.mcap'
+    path.write_bytes(bytes(data))
+    bag = Bag(path)
+    if last == 'channel':
+        assert bag.topics() == {'/n': STRING}
+    else:
+        assert bag.metadata == [(at, 'm', {'k': 'v'}, final)]
+    assert bag.problems == [f'record (opcode 0x{final[0]:02x}) at byte {at} runs past the end '
+                            f'of the file: its length field ({length + (1 << 20)}) is damaged, '
+                            f'its fields give {length}: read by them',
+                            'file has no end of data (truncated recording?)']
+
+
+def test_a_schema_found_in_a_later_chunk_than_the_first_opened(tmp_path):
+    """
+    Look for a channel's schema chunk by chunk until it is found, not only in the first.
+
+    The summary repeats the channel (id 40000, beyond 2^15), not its schema; the schema is
+    in the second chunk only. Both chunks' messages by their message indexes, as the mcap
+    library's stream reader reads them, and the channel's type from that schema.
+    """
+    import zlib
+    from mcap.records import (Channel, Chunk, DataEnd, Footer, Header, MessageIndex,
+                              Schema)
+    channel = Channel(id=40000, schema_id=1, topic='/n', message_encoding='cdr', metadata={})
+    out = MAGIC + built(Header(profile='ros2', library='by hand'))
+    for chunk, (first, extra) in enumerate((((1, 'a'), b''),
+                                            ((2, 'b'), built(Schema(id=1, name=STRING,
+                                                                    encoding='ros2msg',
+                                                                    data=b''))))):
+        records = (built(channel) if chunk == 0 else b'') + extra
+        offset = len(records)
+        records += built(string_record(40000, *first))
+        out += built(Chunk(message_start_time=first[0], message_end_time=first[0],
+                           uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
+                           compression='', data=records))
+        out += built(MessageIndex(channel_id=40000, records=[(first[0], offset)]))
+    out += built(DataEnd(data_section_crc=0))
+    summary = len(out)
+    out += built(channel, Footer(summary_start=summary, summary_offset_start=0,
+                                 summary_crc=0)) + MAGIC
+    path = tmp_path / 'late.mcap'
+    path.write_bytes(out)
+    bag = Bag(path)
+    assert bag.problems == [] and bag.topics() == {'/n': STRING}
+    assert bag.messages(bag.channel('/n', STRING)) == read_before_the_cut(out)
+    assert len(read_before_the_cut(out)) == 2
+
+
+def test_message_indexes_pointing_at_records_that_are_not_whole_messages(tmp_path):
+    """
+    Trust a message index only where it points at whole messages of its channel.
+
+    Three chunks, each indexed entry by entry by hand: a message and one of no data at all
+    (22 bytes, the shortest, ending the chunk): both read, nothing said; a message and a
+    record of a message's opcode one byte too short for one (21 bytes), then a message; a
+    message and one whose length field says a byte more than its chunk holds: those two
+    chunks walked (said), their whole messages read.
+    """
+    import zlib
+    from mcap.records import (Channel, Chunk, DataEnd, Footer, Header, Message,
+                              MessageIndex, Schema)
+    out = MAGIC + built(Header(profile='ros2', library='by hand'),
+                        Schema(id=1, name=STRING, encoding='ros2msg', data=b''),
+                        Channel(id=1, schema_id=1, topic='/n', message_encoding='cdr',
+                                metadata={}))
+    first = built(string_record(1, 1, 'a'))
+    empty = built(Message(channel_id=1, sequence=0, log_time=2, publish_time=2, data=b''))
+    short = record(0x05, struct.pack('<HIQ', 1, 0, 3) + bytes(7))
+    over = bytearray(built(string_record(1, 4, 'd')))
+    struct.pack_into('<Q', over, 1, len(over) - 9 + 1)
+    chunks = []
+    after = built(string_record(1, 5, 'e'))          # so the short record does not end it
+    for second in (empty, short + after, bytes(over)):
+        records = first + second
+        chunks.append(len(out))
+        out += built(Chunk(message_start_time=1, message_end_time=4,
+                           uncompressed_size=len(records), uncompressed_crc=zlib.crc32(records),
+                           compression='', data=records))
+        out += built(MessageIndex(channel_id=1, records=[(1, 0), (2, len(first))]))
+    out += built(DataEnd(data_section_crc=0), Footer(summary_start=0, summary_offset_start=0,
+                                                     summary_crc=0)) + MAGIC
+    path = tmp_path / 'indexes.mcap'
+    path.write_bytes(out)
+    bag = Bag(path)
+    a = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='a'), STRING).tobytes()
+    e = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING](data='e'), STRING).tobytes()
+    assert bag.messages(bag.channel('/n', STRING)) == [(1, a), (2, b''), (1, a), (5, e), (1, a)]
+    walked = [f'chunk at byte {at}: message index of /n does not point at its messages; chunk '
+              'walked instead' for at in chunks[1:]]
+    assert len(first) == len(over) == 41
+    assert bag.problems == walked + [f"chunk at byte {chunks[2]}: a record runs past the "
+                                     "chunk's end at byte 41 of its 82; the rest of the chunk "
+                                     'skipped']
