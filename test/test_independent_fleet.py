@@ -516,7 +516,7 @@ def test_the_layouts_service_speed_every_third_run_a_directory_and_a_seed_repeat
     A service speed of 20 rad/s: each run's top speed 20 rad/s within 5 times its noise
     (0.005 rad/s; 4 samples at the top at 20 samples/s);
     six runs over half a day: every 0.1 day, the third and sixth as rosbag2 directories;
-    the same seed again: the same machine and the same first run's time.
+    the same seed again (two runs: half a day apart): the same machine and first run.
     """
     layout = yaml.safe_load(LAYOUT.read_text())
     layout['balancing']['service_speed'] = 20.0
@@ -531,8 +531,10 @@ def test_the_layouts_service_speed_every_third_run_a_directory_and_a_seed_repeat
         joints, _, _ = messages(run.path)
         assert abs(max(w for _, w in joints) - 20.0) <= 5 * 0.005
         assert len(joints) == math.floor((2 * 20.0 / 12.0 + 0.2) * 20) + 1
-    (again,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'again', runs=1, **options)
+    (again,) = simulate_fleet(tmp_path / 'slow.yaml', tmp_path / 'again', runs=2, **options)
     assert again.as_built == plan.as_built and again.runs[0].when == plan.runs[0].when
+    minutes = (again.runs[1].when - first - timedelta(days=0.5)).total_seconds() / 60
+    assert 0.0 <= minutes < 90.0                        # two runs: the span apart
 
 
 # -- the simulation's parts by themselves (pure: no bag written) ------------------------------

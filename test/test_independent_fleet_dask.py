@@ -43,6 +43,7 @@ def slow_length(item):
 def test_tasks_kept_in_flight_a_few_per_worker_and_each_outcome_once(cluster):
     with _Dask(cluster.scheduler_address, None) as run:
         assert run.workers == 2 and run.cluster is None
+        assert run.client.scheduler.address == cluster.scheduler_address
         real = run.client.submit
         state = {'submitted': 0, 'taken': 0, 'most': 0, 'pure': set()}
 
@@ -65,6 +66,33 @@ def test_tasks_kept_in_flight_a_few_per_worker_and_each_outcome_once(cluster):
         client = run.client
     assert client.status == 'closed'
     assert cluster.status.name == 'running'             # a given scheduler is left running
+
+
+def test_progress_said_on_request_and_a_failure_inside_a_run_raised(cluster, capsys):
+    items = [[k] * (k % 3 + 1) for k in range(25)]           # 49 bags in 25 tasks
+    with _Dask(cluster.scheduler_address, None) as run:
+        assert len(list(run.map(slow_length, items, 'digest', True))) == 25
+        said = capsys.readouterr().err
+        assert 'digest:   0%|' in said and ' 0/49 [' in said
+        assert len(list(run.map(slow_length, items, 'analyse', False))) == 25
+        assert capsys.readouterr().err == ''
+    with pytest.raises(KeyError):
+        with _Dask(cluster.scheduler_address, None):
+            raise KeyError('a bug inside a run')
+
+
+def test_a_scheduler_that_does_not_answer_is_said(monkeypatch):
+    import dask.distributed
+    asked = []
+
+    def client(address, timeout):
+        asked.append((address, timeout))
+        raise TimeoutError('timed out after 20 s')
+    monkeypatch.setattr(dask.distributed, 'Client', client)
+    with pytest.raises(OSError) as caught:
+        _Dask('tcp://10.0.0.9:8786', None)
+    assert str(caught.value) == 'no Dask scheduler at tcp://10.0.0.9:8786: timed out after 20 s'
+    assert asked == [('tcp://10.0.0.9:8786', '20s')]
 
 
 def test_a_task_that_breaks_fails_each_of_its_bags_in_words(cluster, monkeypatch):
@@ -122,6 +150,7 @@ def test_the_cluster_it_makes_and_a_run_on_it_gives_the_local_engines_rows(
     assert environ.get('MALLOC_TRIM_THRESHOLD_') is not None        # Dask's default
     with _Dask(None, 3) as run:
         assert run.workers == 2                       # the threads the cluster has
+        assert run.client.scheduler.address == cluster.scheduler_address
     record = made.pop()
     assert record == {'n_workers': 3, 'threads_per_worker': 1, 'processes': True,
                       'dashboard_address': None, 'silence_logs': logging.ERROR,
@@ -137,6 +166,15 @@ def test_the_cluster_it_makes_and_a_run_on_it_gives_the_local_engines_rows(
     (record,) = made
     assert record['n_workers'] == min(2, os.cpu_count() or 1) and record['closed']
     assert (report.engine, report.workers, report.found, report.analysed) == ('dask', 2, 2, 2)
+    # The workers asked for, the default for 8 cores and for an unknown count; a scheduler.
+    for workers, cores, want in ((1, 2, 1), (None, 8, 2), (None, None, 1)):
+        monkeypatch.setattr(os, 'cpu_count', lambda: cores)
+        run_fleet([tmp_path / 'runs'], tmp_path / 'again.parquet', workers=workers,
+                  progress=False)
+        assert made[-1]['n_workers'] == want
+    report = run_fleet([tmp_path / 'runs'], tmp_path / 'given.parquet',
+                       scheduler=cluster.scheduler_address, progress=False)
+    assert len(made) == 4 and (report.workers, report.analysed) == (2, 2)
     local = run_fleet([tmp_path / 'runs'], tmp_path / 'local.parquet', engine='local',
                       progress=False)
     assert (local.found, local.analysed) == (2, 2)

@@ -330,3 +330,17 @@ def test_supports_in_any_order_and_added_later_are_all_counted_and_kept(tmp_path
     assert data['supports']['front']['revolutions'] == pytest.approx(1.0, rel=1e-12)
     assert data['supports']['front']['seconds'] == 1.0
     assert data['supports']['rear']['revolutions'] == pytest.approx(0.5, rel=1e-12)
+
+
+def test_the_duty_of_a_start_under_a_second_is_that_since_start(tmp_path):
+    """Half a turn in 0.5 s after a state file's hour: the rate is that of the 0.5 s."""
+    path = state(tmp_path / 'state.json', {
+        'front': {'bearing': asdict(BALL), 'revolutions': 1000.0, 'damage': 100.0,
+                  'seconds': 3600.0}})
+    life = BearingLife(path)
+    life.layout(SUPPORTS[:1])
+    life.counting.add_sample(0.0, 0.0, TWO_PI, LOADS)
+    life.counting.add_sample(0.5, math.pi, TWO_PI, LOADS)
+    _, _, values = life.status(0.0)
+    assert values['front life used per hour of running'] == pytest.approx(
+        0.5 * FRONT_RATE / 1e6 / (0.5 / 3600.0), rel=1e-12)

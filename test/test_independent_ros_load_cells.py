@@ -297,6 +297,14 @@ def test_the_status_says_why_the_measurement_is_not_yet_the_verdict_and_what_dis
     level, message, _ = cells.diagnose(of_record)
     assert (level, of_record.measured.level) == (assessment.WARN, assessment.OK)
     assert message == f'measured: {of_record.measured.text}; {of_record.disagreement_text}'
+    # Where the layout's verdict stands, the cells' status is the measured rotor's level.
+    from dataclasses import replace
+    standing = replace(of_record, source='layout', level=assessment.ERROR, disagreements=(),
+                       reason='the layout was just changed')
+    level, message, _ = cells.diagnose(standing)
+    assert level == assessment.OK
+    assert message == (f'measured: {of_record.measured.text} (not yet the verdict of record: '
+                       'the layout was just changed)')
     # No service speed and the rotor not turned: the layout's verdict stands, said why.
     plain = copy.deepcopy(GANTRY)
     del plain['balancing']['service_speed']
