@@ -18,6 +18,8 @@ from unittest import mock
 import numpy as np
 import pytest
 import rclpy
+import rclpy.time
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message, serialize_message
@@ -31,7 +33,7 @@ from cvc_balance.ros import balance_monitor
 from cvc_balance.ros.balance_monitor import BalanceMonitor
 from independent import PinocchioRotor
 
-GRAVITY = [0.0, -9.80665 * math.cos(0.2), 9.80665 * math.sin(0.2)]
+GRAVITY = [0.0, -9.80665 * math.cos(1.2), 9.80665 * math.sin(1.2)]   # the axial load peaks
 TWO = {'name': 'two supports', 'gravity': GRAVITY,
        'components': [
            {'name': 'a', 'mass': 20.0, 'radius': 0.5, 'angle_deg': 30.0, 'z': -0.1,
@@ -82,7 +84,10 @@ def node():
             Parameter('max_stamp_jump', value=0.5), Parameter('stale_after', value=3.0)])
         monitor.published, monitor.clock = published, clock
         yield monitor
-        monitor.destroy_node()
+        try:
+            monitor.destroy_node()
+        except Exception:       # a mutant's broken state (mutants_in_process): go on
+            Node.destroy_node(monitor)
     rclpy.try_shutdown(context=context)
 
 
@@ -145,7 +150,7 @@ def test_each_motion_sample_gives_pinocchios_loads_in_their_frames_with_its_stam
     put_layout(node, TWO)
     assert node._layout_error == ''
     reference = PinocchioRotor(TWO)
-    omega = 7.5
+    omega = 3.0
     start = node._counts['accepted']
     for i in range(4):          # constant speed: alpha is 0
         angle = 0.3 + omega * 0.01 * i
@@ -184,7 +189,10 @@ def test_each_motion_sample_gives_pinocchios_loads_in_their_frames_with_its_stam
     peak = max(np.linalg.norm(reference.loads(0.3 + omega * 0.01 * i, omega, 0.0)['supports']
                               [name][0]) for i in range(4) for name in ('front', 'rear'))
     assert float(values['peak bearing load [N]']) == pytest.approx(peak, rel=1e-5)
+    assert max(np.linalg.norm(expected['supports'][name][0]) for name in ('front', 'rear')) \
+        == pytest.approx(abs(expected['supports']['rear'][0][2]), rel=0.2)
     assert values['accepted'] == str(start + 4)
+    assert float(values['input rate [Hz]']) == pytest.approx(4 / 0.04)
     assert float(values['speed [rad/s]']) == omega
     assert float(values['top speed seen [rad/s]']) == omega
     assert float(values['last motion sample [s ago]']) == 0.0
@@ -261,6 +269,42 @@ def test_the_verdict_of_a_layout_is_its_static_grade_at_the_top_speed_seen(
     assert status.level == level
     assert status.message == f'{words} (from the layout: no load cells)'
     assert values['layout warnings'] == ''
+    couple = 5.0 * 0.7 * (0.1 - 5.0 * 0.1 / 405.0) * 1e9     # m r (z - z_c), g mm^2
+    assert float(values['couple unbalance [g mm^2]']) == pytest.approx(couple, rel=1e-5)
+    assert float(values['couple unbalance angle [deg]']) == pytest.approx(40.0)
+    assert float(values['judged at [rad/s]']) == 10.0
+    assert float(values['layout achieved grade [mm/s]']) == pytest.approx(achieved, rel=1e-5)
+    assert float(values['grade [mm/s]']) == grade
+    assert values['verdict level'] == values['layout verdict level'] == \
+        {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
+         DiagnosticStatus.ERROR: 'ERROR'}[level]
+    assert values['verdict'] == status.message
+    assert values['layout verdict'] == words
+    assert values['what would explain it'] == ''
+    assert list(values) == [
+        'accepted', 'rejected', 'dropped', 'input rate [Hz]', 'peak bearing load [N]',
+        'rejected in the last period', 'internal errors', 'last rejected input',
+        'last rejected layout', 'layout', 'layout digest', 'speed [rad/s]',
+        'top speed seen [rad/s]', 'grade [mm/s]', 'verdict level', 'verdict',
+        'verdict source', 'what would explain it', 'achieved grade [mm/s]',
+        'layout verdict level', 'layout verdict', 'judged at [rad/s]', 'judged at',
+        'layout achieved grade [mm/s]', 'static unbalance [g mm]',
+        'static unbalance angle [deg]', 'couple unbalance [g mm^2]',
+        'couple unbalance angle [deg]', 'permissible [g mm]', 'layout warnings',
+        'last motion sample [s ago]']
+    assert values['internal errors'] == '0'
+
+
+def test_two_supports_are_judged_in_planes_i_and_ii(node):
+    """Name each plane's values after the plane, I before II (the statuses' words)."""
+    put_layout(node, TWO)
+    sample(node, 0.0, 3.0)
+    _, values = diagnostics(node)['rotor balance']
+    planes = [key for key in values if key.startswith('plane ')]
+    assert planes == [f'plane {label} {what}' for label in ('I', 'II') for what in (
+        'z [m]', 'unbalance [g mm]', 'angle [deg]', 'permissible [g mm]',
+        'unbalance / permissible', 'correction mass [g]', 'correction angle [deg]')]
+    assert (float(values['plane I z [m]']), float(values['plane II z [m]'])) == (-0.3, 0.35)
 
 
 def test_no_layout_and_a_refused_one_are_said_in_the_headline(node, monkeypatch):
@@ -303,3 +347,41 @@ def test_no_motion_sample_for_stale_after_is_stale_naming_the_topics(node):
     node.clock.advance(-0.5)
     status, _ = diagnostics(node)['rotor balance']
     assert status.level == DiagnosticStatus.OK
+
+
+class RosClock:
+    """The node's ROS clock, on the test's monotonic clock's line (900 s behind it)."""
+
+    def __init__(self, clock):
+        self.clock = clock
+
+    def now(self):
+        return rclpy.time.Time(nanoseconds=self.clock.ns - 900 * 10**9)
+
+
+def test_speed_samples_are_stamped_now_and_their_angle_integrated(node, monkeypatch):
+    """Integrate q = omega t over the receive times (from 0) and stamp each output then."""
+    put_layout(node, TWO)
+    monkeypatch.setattr(node, 'get_clock', lambda: RosClock(node.clock))
+    reference = PinocchioRotor(TWO)
+    accepted = node._counts['accepted']
+    omega = 0.5
+    for i in range(3):
+        wrenches(node)
+        node.clock.advance(0.02)
+        node._on_speed(serialize_message(Float64(data=omega)))
+    assert node._counts['accepted'] == accepted + 3
+    out = wrenches(node)
+    stamp = divmod(node.clock.ns - 900 * 10**9, 10**9)
+    expected = reference.loads(2 * 0.02 * omega, omega, 0.0)
+    (bearing,) = out['/bearing_load']
+    assert (bearing.header.stamp.sec, bearing.header.stamp.nanosec) == stamp
+    scale = 1e-9 * 40.0 * 9.81 * 10
+    np.testing.assert_allclose(vector(bearing.wrench.force), expected['force'], atol=scale)
+    np.testing.assert_allclose(vector(bearing.wrench.torque), expected['moment'], atol=scale)
+    (unbalance,) = out['/unbalance']
+    assert (unbalance.header.stamp.sec, unbalance.header.stamp.nanosec) == stamp
+    np.testing.assert_allclose(vector(unbalance.wrench.force), reference.unbalance(omega)[0],
+                               atol=scale)
+    _, values = diagnostics(node)['rotor balance']
+    assert float(values['top speed seen [rad/s]']) == omega
