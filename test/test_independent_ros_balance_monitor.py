@@ -326,7 +326,10 @@ def test_no_layout_and_a_refused_one_are_said_in_the_headline(node, monkeypatch)
     assert node._layout_error.startswith('layout topic: ')
     status, values = diagnostics(node)['rotor balance']
     assert values['last rejected layout'] == node._layout_error
-    assert status.message.endswith(f'; last layout rejected: {node._layout_error}')
+    assert status.message == (
+        'balance grade not judged: the layout names no service speed '
+        '(balancing.service_speed) and the rotor has not turned (from the layout: no load '
+        f'cells); last layout rejected: {node._layout_error}')
     put_layout(node, one_support(200.0))
     assert node._layout_error == ''
 
@@ -385,3 +388,26 @@ def test_speed_samples_are_stamped_now_and_their_angle_integrated(node, monkeypa
                                atol=scale)
     _, values = diagnostics(node)['rotor balance']
     assert float(values['top speed seen [rad/s]']) == omega
+
+
+def test_of_layouts_that_come_meanwhile_the_newest_waits_and_the_others_are_dropped(node):
+    """Parse one layout at a time; the newest waits for it, and is put in force after it."""
+    dropped = node._layouts_dropped
+    node._on_layout(String(data=json.dumps(one_support(10.0))))
+    assert node._layout_poll is not None
+    node._on_layout(String(data=json.dumps(one_support(20.0))))
+    node._on_layout(String(data=json.dumps(dict(one_support(30.0), supports=[]))))
+    assert node._layouts_dropped == dropped + 1
+    node._preparing.result()
+    node._take_prepared()
+    assert node._active.layout.name == 'drum G10'
+    assert node._layout_poll is not None and node._waiting is None
+    node._preparing.result()
+    node._take_prepared()
+    assert node._active.layout.name == 'drum G10'
+    assert node._layout_error.startswith('layout topic: ')
+    assert (node._preparing, node._waiting, node._layout_poll) == (None, None, None)
+    status, values = diagnostics(node)['input checks']
+    assert values['layouts dropped unparsed'] == str(dropped + 1)
+    put_layout(node, one_support(20.0))
+    assert node._layout_poll is None
