@@ -411,3 +411,58 @@ def test_of_layouts_that_come_meanwhile_the_newest_waits_and_the_others_are_drop
     assert values['layouts dropped unparsed'] == str(dropped + 1)
     put_layout(node, one_support(20.0))
     assert node._layout_poll is None
+
+
+class Logger:
+    """The node's logger in the test: (severity, text) of each line."""
+
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(('info', text))
+
+    def warning(self, text):
+        self.lines.append(('warning', text))
+
+    def error(self, text):
+        self.lines.append(('error', text))
+
+
+def test_level_changes_refusals_and_rejections_are_logged_once_at_their_severity(
+        node, monkeypatch):
+    """Log a change of level once; a refused layout as an error; rejections once a second."""
+    logger = Logger()
+    monkeypatch.setattr(node, 'get_logger', lambda: logger)
+    put_layout(node, one_support(200.0))
+    sample(node, 0.0, 10.0)
+    diagnostics(node)
+    ok = 'G 86.4 at the top speed seen 10 rad/s: WITHIN G 200 (from the layout: no load cells)'
+    node._reported_level = None
+    logger.lines.clear()
+    diagnostics(node)
+    diagnostics(node)
+    assert logger.lines == [('info', f'balance OK: {ok}')]
+    logger.lines.clear()
+    put_layout(node, one_support(40.0))         # the new verdict at once
+    sample(node, 0.0, 10.0)
+    diagnostics(node)
+    assert logger.lines[0] == ('info', 'layout received on the layout topic '
+                               f'({len(json.dumps(one_support(40.0)))} characters): parsing')
+    assert logger.lines[-1] == ('error', 'balance ERROR: G 86.4 at the top speed seen 10 '
+                                'rad/s: OUT OF G 40 (from the layout: no load cells)')
+    logger.lines.clear()
+    put_layout(node, dict(one_support(40.0), supports=[]))
+    assert logger.lines[-1] == (
+        'error', f"layout rejected ('drum G40' stays in force): {node._layout_error}")
+    logger.lines.clear()
+    node.clock.advance(1.0)
+    sample(node, 0.0, 10.0, names=('spun',))
+    sample(node, 0.0, 10.0, names=('spun',))
+    assert logger.lines == [('warning', "rejected /joint_states without joint 'spin' (it "
+                             "names 'spun'): set joint_name")]
+    node.clock.advance(3.5)
+    diagnostics(node)
+    assert logger.lines[-1][0] == 'warning'
+    assert logger.lines[-1][1].startswith('balance STALE: no motion sample for 4.5 s on ')
+    put_layout(node, one_support(200.0))
