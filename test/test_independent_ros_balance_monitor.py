@@ -145,6 +145,41 @@ def diagnostics(node):
             for s in array.status}
 
 
+def test_a_new_node_has_counted_nothing_and_waits_for_a_layout(node):
+    """Say WARN, where the layout is awaited, and zero counts (first: the node is new)."""
+    status, values = diagnostics(node)['rotor balance']
+    assert (status.level, status.message) == (
+        DiagnosticStatus.WARN, 'no layout (waiting for one on /layout, or set layout_file)')
+    assert status.hardware_id == 'M7'
+    assert values == {'accepted': '0', 'rejected': '0', 'dropped': '0', 'input rate [Hz]': '0',
+                      'peak bearing load [N]': '0', 'rejected in the last period': '0',
+                      'internal errors': '0', 'last rejected input': '',
+                      'last rejected layout': ''}
+    assert (node._top_speed, node._omega, node._last_time, node._layout_poll) == (
+        0.0, 0.0, None, None)
+
+
+def test_the_subscriptions_take_raw_bytes_through_the_guard(node):
+    """Subscribe joint_states and speed raw, layout as messages; a failure is counted."""
+    subscriptions = {s.topic_name: s for s in node.subscriptions}
+    assert {name: (s.msg_type, s.raw) for name, s in subscriptions.items()} == {
+        '/joint_states': (JointState, True), '/speed': (Float64, True),
+        '/layout': (String, False)}
+    dropped, errors = node._counts['dropped'], node._internal_errors
+    subscriptions['/joint_states'].callback(joint_states(1, 0, 0.0, 1.0))
+    subscriptions['/speed'].callback(serialize_message(Float64(data=1.0)))
+    assert node._counts['dropped'] == dropped + 2        # no layout yet
+    subscriptions['/joint_states'].callback(None)
+    assert node._internal_errors == errors + 1
+    assert node._last_rejection == ("internal error in _on_joint_states: TypeError: object of "
+                                    "type 'NoneType' has no len()")
+    node._internal_errors = errors      # the later tests count from 0
+    subscriptions['/layout'].callback(String(data=json.dumps(TWO)))
+    node._preparing.result()
+    node._take_prepared()
+    assert node._active.layout.name == 'two supports'
+
+
 def test_each_motion_sample_gives_pinocchios_loads_in_their_frames_with_its_stamp(node):
     """Publish bearing, support, unbalance and drive torque wrenches as Pinocchio has them."""
     put_layout(node, TWO)
@@ -366,6 +401,7 @@ def test_speed_samples_are_stamped_now_and_their_angle_integrated(node, monkeypa
     """Integrate q = omega t over the receive times (from 0) and stamp each output then."""
     put_layout(node, TWO)
     monkeypatch.setattr(node, 'get_clock', lambda: RosClock(node.clock))
+    monkeypatch.setattr(node, '_integrator', type(node._integrator)())    # q from 0
     reference = PinocchioRotor(TWO)
     accepted = node._counts['accepted']
     omega = 0.5
