@@ -267,7 +267,8 @@ def test_samples_off_the_time_line_or_without_the_joint_are_rejected_in_words(no
         'G 17.3 at the top speed seen 2 rad/s: WITHIN G 200 (from the layout: no load cells); '
         f'6 motion samples rejected in the last 1 s (last: {node._last_rejection})')
     assert values['last rejected input'] == node._last_rejection
-    assert diagnostics(node)['rotor balance'][1]['rejected in the last period'] == '0'
+    _, values = diagnostics(node)['rotor balance']
+    assert (values['rejected in the last period'], values['peak bearing load [N]']) == ('0', '0')
 
 
 @pytest.mark.parametrize('grade, level, words', [
@@ -502,3 +503,26 @@ def test_level_changes_refusals_and_rejections_are_logged_once_at_their_severity
     assert logger.lines[-1][0] == 'warning'
     assert logger.lines[-1][1].startswith('balance STALE: no motion sample for 4.5 s on ')
     put_layout(node, one_support(200.0))
+
+
+def test_a_speed_ramp_gives_pinocchios_drive_torque_and_loads_at_its_slope(node, monkeypatch):
+    """Estimate alpha as the ramp's slope; a layout parsed meanwhile takes the next sample."""
+    node._on_layout(String(data=json.dumps(TWO)))
+    node._preparing.result()
+    monkeypatch.setattr(node, '_alpha', type(node._alpha)(0.1))   # no earlier samples
+    reference = PinocchioRotor(TWO)
+    node.clock.advance(1.0)
+    for i in range(6):          # omega = 2 + 3 t, q = 2 t + 1.5 t^2
+        t = 0.01 * i
+        wrenches(node)
+        sample(node, 2 * t + 1.5 * t * t, 2 + 3 * t, after=0.0 if i == 0 else 0.01)
+        assert node._active.layout.name == 'two supports'
+    out = wrenches(node)
+    expected = reference.loads(2 * t + 1.5 * t * t, 2 + 3 * t, 3.0)
+    scale = 1e-6 * 40.0 * 9.81
+    (torque,) = out['/drive_torque']
+    assert torque.wrench.torque.z == pytest.approx(expected['drive_torque'], abs=scale)
+    assert abs(expected['drive_torque'] - reference.loads(2 * t + 1.5 * t * t, 2 + 3 * t,
+                                                          0.0)['drive_torque']) > 0.1
+    (bearing,) = out['/bearing_load']
+    np.testing.assert_allclose(vector(bearing.wrench.force), expected['force'], atol=scale)
