@@ -122,11 +122,13 @@ MODULES = {
     'ros_recorder': ('cvc_balance/ros/recorder.py', ['test/test_independent_ros_recorder.py']),
     'ros_qos': ('cvc_balance/ros/qos.py', ['test/test_independent_ros_node_parts.py']),
     'ros_executor': ('cvc_balance/ros/executor.py', ['test/test_independent_ros_node_parts.py']),
-    # Of the node itself only its module-level functions (prepare_layout, recording_label,
-    # _text, usage, main's refusals): --mutants '*balance_monitor.x_*'; the node's methods
-    # run in node processes (docs/mutation.md).
+    # The module functions (prepare_layout, recording_label, _text, usage, main's refusals:
+    # --mutants '*balance_monitor.x_*') and the node class in process (its callbacks
+    # called directly: test_independent_ros_balance_monitor.py; check its mutants with
+    # mutants_in_process.py, one process; docs/mutation.md).
     'ros_balance_monitor': ('cvc_balance/ros/balance_monitor.py',
-                            ['test/test_independent_ros_node_parts.py']),
+                            ['test/test_independent_ros_node_parts.py',
+                             'test/test_independent_ros_balance_monitor.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
                     'simulate', 'charts')},

@@ -273,6 +273,7 @@ def test_samples_off_the_time_line_or_without_the_joint_are_rejected_in_words(no
 
 @pytest.mark.parametrize('grade, level, words', [
     (200.0, DiagnosticStatus.OK, 'G 86.4 at the top speed seen 10 rad/s: WITHIN G 200'),
+    (150.0, DiagnosticStatus.OK, 'G 86.4 at the top speed seen 10 rad/s: WITHIN G 150'),
     (100.0, DiagnosticStatus.WARN,
      'G 86.4 at the top speed seen 10 rad/s: WITHIN G 100, NEAR ITS LIMIT'),
     (40.0, DiagnosticStatus.ERROR, 'G 86.4 at the top speed seen 10 rad/s: OUT OF G 40')])
