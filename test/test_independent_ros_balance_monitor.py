@@ -527,3 +527,44 @@ def test_a_speed_ramp_gives_pinocchios_drive_torque_and_loads_at_its_slope(node,
                                                           0.0)['drive_torque']) > 0.1
     (bearing,) = out['/bearing_load']
     np.testing.assert_allclose(vector(bearing.wrench.force), expected['force'], atol=scale)
+
+
+def test_an_implausible_layout_is_a_warn_with_its_first_warning_in_the_headline(node):
+    """Say how many warnings and the first; list them all, ' | ' between, in the values."""
+    layout = one_support(200.0)
+    angles = (10.0, 10.0 + math.pi / 2)       # radians, more than a full turn
+    layout['components'][1:] = [
+        {'name': name, 'mass': 5.0, 'radius': 0.7, 'angle': angle, 'z': 0.1}
+        for name, angle in zip(('lump', 'lump2'), angles)]
+    put_layout(node, layout)
+    sample(node, 0.0, 10.0)
+    status, values = diagnostics(node)['rotor balance']
+    said = [f"component '{name}': angle {angle:.6g} rad ({math.degrees(angle):.6g} deg) is "
+            'more than a full turn: degrees in the radians field? (angle_deg takes degrees)'
+            for name, angle in zip(('lump', 'lump2'), angles)]
+    assert values['layout warnings'] == ' | '.join(said)
+    achieved = math.hypot(3.5, 3.5) / 410.0 * 10.0 * 1e3        # 0.60 of G 200: OK
+    assert status.level == DiagnosticStatus.WARN
+    assert status.message == (
+        f'G {achieved:.3g} at the top speed seen 10 rad/s: WITHIN G 200 (from the layout: no '
+        f'load cells); layout implausible? 2 warning(s): {said[0]}')
+    put_layout(node, one_support(200.0))
+
+
+def test_each_planes_unbalance_and_correction_mass_by_the_lever_rule(node):
+    """Split 5 kg at 0.7 m, z 0.1 over planes at z -0.2 and 0.3; correct at 0.5 m opposite."""
+    layout = dict(one_support(200.0), supports=[{'name': 'front', 'z': -0.2},
+                                                {'name': 'rear', 'z': 0.3, 'axial': True}])
+    layout['balancing'] = {'grade': 200.0, 'correction_radius': 0.5}
+    put_layout(node, layout)
+    sample(node, 0.0, 10.0)
+    _, values = diagnostics(node)['rotor balance']
+    for label, share in (('I', (0.3 - 0.1) / 0.5), ('II', (0.1 + 0.2) / 0.5)):
+        amount = 3.5 * share                                        # kg m
+        unbalance = float(values[f'plane {label} unbalance [g mm]'])
+        assert unbalance == pytest.approx(amount * 1e6, rel=1e-5)
+        assert float(values[f'plane {label} angle [deg]']) == pytest.approx(40.0)
+        assert float(values[f'plane {label} correction mass [g]']) == pytest.approx(
+            amount / 0.5 * 1e3, rel=1e-5)
+        assert float(values[f'plane {label} correction angle [deg]']) == pytest.approx(220.0)
+    put_layout(node, one_support(200.0))
