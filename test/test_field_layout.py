@@ -110,3 +110,53 @@ def test_bad_sites_on_the_command_line(tmp_path):
     assert done.returncode == 2 and done.stdout == ''
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and 'balancing.sites.I.stack' in lines[0]
+
+
+def refusal(sites):
+    """Return the one line a layout with these weight sites is refused with."""
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(with_sites(sites))
+    return str(refused.value)
+
+
+def test_the_sites_refusals_word_for_word():
+    """Each refusal of balancing.sites in the exact words the user reads."""
+    where = 'layout: field balancing.sites'
+    one = GOOD['I']
+    known = 'angles, angles_deg, radius, masses, stack, first_hole_angle_deg, numbering'
+    cases = [
+        ({'I': one, 'rotation': 'up'},
+         f"{where}.rotation must be one of positive, negative, got 'up'"),
+        ({'I': dict(one, first_hole_angle_deg=90, numbering='with_rotation')},
+         f'{where}.I.numbering counts with or against the rotation: give {where}.rotation '
+         '(positive: rotor X toward rotor Y)'),
+        ({'I': dict(one, first_hole_angle_deg=90, numbering='sideways'), 'rotation': 'positive'},
+         f"{where}.I.numbering must be one of with_rotation, against_rotation, got 'sideways'"),
+        ({'I': dict(one, first_hole_angle_deg=7, numbering='with_rotation'),
+          'rotation': 'positive'},
+         f'{where}.I.first_hole_angle_deg: no site at 7 deg (hole 1 is one of the sites)'),
+        ({'I': dict(one, first_hole_angle_deg='north', numbering='with_rotation'),
+          'rotation': 'positive'},
+         f"{where}.I.first_hole_angle_deg must be a number, got 'north'"),
+        ({'I': dict(one, numbering='with_rotation'), 'rotation': 'positive'},
+         f'{where}.I: give both first_hole_angle_deg and numbering, or neither'),
+        ({'I': dict(one, stack=21)}, f'{where}.I.stack must be a whole number from 1 to 20, '
+         'got 21'),
+        ({'I': {'angles': [0.0, 2.0], 'masses': [0.1]}}, f'{where}.I: missing field radius'),
+        ({'I': {'angles': [0.0, 2.0], 'radius': 0.5}}, f'{where}.I: missing field masses'),
+        ({'I': [1]}, f'{where}.I: expected a mapping of fields, got list'),
+        ({'I': dict(one, colour='red')}, f"{where}.I: unknown field 'colour' (known: {known})"),
+        ({'III': one}, f"{where}: unknown field 'III' (known: I, II, rotation)"),
+        ({'I': {'angles': [0.0, 1e10], 'radius': 0.5, 'masses': [0.1]}},
+         f'{where}.I.angles[1] must be within +-1e+09 rad (the reduction to a turn stays '
+         'exact), got 1e+10 rad'),
+        ({'I': {'angles': [0.0, 2 * math.pi - 1e-10], 'radius': 0.5, 'masses': [0.1]}},
+         f'{where}.I.angles: two sites at the same angle'),          # across the turn
+    ]
+    for sites, said in cases:
+        assert refusal(sites) == said, sites
+    # Accepted at the edges: 20 stacked, hole 1 given a turn away from its site.
+    layout = parse_layout(with_sites({'I': dict(one, stack=20, first_hole_angle_deg=360,
+                                                numbering='with_rotation'),
+                                      'rotation': 'positive'}))
+    assert layout.balancing.sites[0].stack == 20 and layout.balancing.sites[0].first_hole == 0.0
