@@ -8,6 +8,7 @@ mutation run (benchmarks/mutation.py) can afford them; test_layout.py checks the
 line's exit code and single line for the same kinds of mistake.
 """
 
+from collections import OrderedDict
 import hashlib
 import json
 import math
@@ -17,7 +18,8 @@ import pytest
 
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.layout import DEFAULT_GRADE, LayoutError, one_line, parse_layout
+from cvc_balance.physics.layout import (DEFAULT_GRADE, LayoutError, one_line, parse_layout,
+                                        plain_columns)
 
 
 def good():
@@ -340,3 +342,49 @@ def test_one_line_joins_the_lines_and_cuts_at_the_limit():
     assert one_line(words, 20) == 'word word word word ... (499 characters)'
     assert one_line('w' * 300) == 'w' * 300                   # the default limit: whole
     assert one_line('w' * 301) == 'w' * 300 + '... (301 characters)'
+
+
+def test_point_masses_of_the_wrong_types_are_refused_not_taken_fast():
+    """The fast path for plain point masses takes only str names and float or int numbers."""
+    plain = {'name': 'a', 'mass': 1.0, 'radius': 0.5, 'angle': 0.0, 'z': 0.1}
+    for change, said in (
+            ({'name': 5}, 'component #1: field name must be a non-empty string, got 5'),
+            ({'name': ''}, "component #1: field name must be a non-empty string, got ''"),
+            ({'radius': '0.5'}, "component 'a': field radius must be a number, got '0.5'"),
+            ({'z': '0.1'}, "component 'a': field z must be a number, got '0.1'")):
+        layout = good()
+        layout['components'] = [dict(plain, **change)]
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said, change
+
+
+def test_shapes_of_the_wrong_sizes_are_refused_and_any_mapping_is_read():
+    """A cylinder's radius as a list, a box of 4 sizes: refused; an OrderedDict as a dict."""
+    for shape, said in (
+            ({'type': 'cylinder', 'radius': [0.1, 0.1, 0.1], 'length': 0.3},
+             "component 'tube': field shape.radius must be a number, got [0.1, 0.1, 0.1]"),
+            ({'type': 'box', 'size': [0.1, 0.2, 0.3, 0.4]},
+             "component 'tube': field shape.size must be a list of 3 numbers, got "
+             '[0.1, 0.2, 0.3, 0.4]')):
+        layout = good()
+        layout['components'][0]['shape'] = shape
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said, shape
+    ordered = good()
+    ordered['components'][0]['shape'] = OrderedDict(ordered['components'][0]['shape'])
+    assert parse_layout(ordered) == parse_layout(good())
+    assert parse_layout(ordered).components[0].shape.axis == 'tangential'
+
+
+def test_plain_columns_says_false_for_anything_the_careful_reader_would_name():
+    """Names non-empty, at most 200 printable characters, unique; numbers within limits."""
+    def columns(names, mass=1.0):
+        n = len(names)
+        return (names, np.full(n, mass), np.full(n, 0.5), np.zeros(n), np.zeros(n))
+    assert plain_columns(*columns(['a', 'b'])) is True
+    assert plain_columns(*columns(['a', 'b' * 200])) is True
+    for names, mass in ((['a', ''], 1.0), (['a', 'b' * 201], 1.0), (['a', 'b\n'], 1.0),
+                        (['a', 'a'], 1.0), (['a', 'b'], math.nan), ([], 1.0)):
+        assert plain_columns(*columns(names, mass)) is False, (names, mass)
