@@ -19,7 +19,7 @@ import pytest
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import (DEFAULT_GRADE, LayoutError, one_line, parse_layout,
-                                        plain_columns)
+                                        plain_columns, short)
 
 
 def good():
@@ -388,3 +388,26 @@ def test_plain_columns_says_false_for_anything_the_careful_reader_would_name():
     for names, mass in ((['a', ''], 1.0), (['a', 'b' * 201], 1.0), (['a', 'b\n'], 1.0),
                         (['a', 'a'], 1.0), (['a', 'b'], math.nan), ([], 1.0)):
         assert plain_columns(*columns(names, mass)) is False, (names, mass)
+
+
+def test_short_shows_a_value_in_at_most_about_40_characters():
+    """Short lists of short scalars printed, containers described, the rest cut (by hand)."""
+    big = 1234567890
+    cases = [
+        ([0.0, -9.8], '[0.0, -9.8]'),
+        ([1, 2, 3, 4, 5, 6], '[1, 2, 3, 4, 5, 6]'),
+        ([1, 2, 3, 4, 5, 6, 7], 'a list of 7 items'),
+        ([big, big, big, 12], '[1234567890, 1234567890, 1234567890, 12]'),    # 40: whole
+        ([big, big, big, 123], 'a list of 4 items'),                           # 41
+        ([{'a': 1}], 'a list of 1 items'), ([[1]], 'a list of 1 items'),
+        ([2 ** 63], '[9223372036854775808]'), ([2 ** 64], 'a list of 1 items'),
+        (['a' * 20], "['" + 'a' * 20 + "']"), (['a' * 21], 'a list of 1 items'),
+        (2 ** 127, str(2 ** 127)),                                             # 39 digits
+        (2 ** 128, 'an integer of about 39 digits'),
+        ('a' * 38, "'" + 'a' * 38 + "'"),                                      # 40: whole
+        ('a' * 39, "'" + 'a' * 39 + '...'),
+        ('a' * 40, "'" + 'a' * 39 + '...'),
+        ('a' * 41, "'" + 'a' * 40 + "'... (41 characters)"),
+    ]
+    for value, said in cases:
+        assert short(value) == said, value
