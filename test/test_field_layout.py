@@ -160,3 +160,17 @@ def test_the_sites_refusals_word_for_word():
                                                 numbering='with_rotation'),
                                       'rotation': 'positive'}))
     assert layout.balancing.sites[0].stack == 20 and layout.balancing.sites[0].first_hole == 0.0
+
+
+def test_the_canonical_json_has_the_sites_numbering_only_when_given():
+    """Fields added later (first_hole, numbering, rotation) are written only when given."""
+    plain = json.loads(parse_layout(with_sites(GOOD)).canonical_json())
+    fields = {'angles', 'masses', 'plane', 'radius', 'stack'}
+    assert [set(s) for s in plain['balancing']['sites']] == [fields, fields]
+    numbered = json.loads(parse_layout(with_sites({
+        'I': dict(GOOD['I'], first_hole_angle_deg=90, numbering='against_rotation'),
+        'rotation': 'negative'})).canonical_json())
+    (sites,) = numbered['balancing']['sites']
+    assert set(sites) == fields | {'first_hole', 'numbering', 'rotation'}
+    assert (sites['first_hole'], sites['numbering'], sites['rotation']) == \
+        (math.radians(90), 'against_rotation', 'negative')
