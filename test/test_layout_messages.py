@@ -411,3 +411,40 @@ def test_short_shows_a_value_in_at_most_about_40_characters():
     ]
     for value, said in cases:
         assert short(value) == said, value
+
+
+def test_supports_and_bearings_refused_word_for_word():
+    """A support's name, the supports' and the planes' spacing, a bearing: the exact words."""
+    spacing = ('must be from 0.001 to 2e+12 m (a millimetre or more: closer is one bearing or '
+               'plane, and moments are divided by the spacing), got 0.0005 m')
+    long_name = 'a' * 201
+
+    def supports(front, rear=None):
+        return lambda layout: layout.update(supports=[
+            dict({'name': 'front', 'z': -0.25}, **front),
+            dict({'name': 'rear', 'z': 0.25, 'axial': True}, **(rear or {}))])
+    for change, said in (
+            (supports({'name': '1front'}), "support '1front': field name must be a ROS name "
+             'token (letters, digits and _, not starting with a digit): it names the topic '
+             'supports/<name>/load'),
+            (supports({'name': long_name}), f"support {short(long_name)}: field name must be "
+             f'one line of at most 200 printable characters, got {short(long_name)}'),
+            (supports({'z': 0.0}, {'z': 0.0005}),
+             f'layout: field supports: the spacing of the two supports {spacing}'),
+            (lambda layout: layout.update(balancing={'planes': [0.0, 0.0005]}),
+             f'layout: field balancing.planes: the spacing z_II - z_I {spacing}'),
+            (supports({'bearing': 3.0}),
+             "support 'front': field bearing: expected a mapping of fields, got float"),
+            (supports({'bearing': {'C': 0.0}}), "support 'front': field bearing.C must be from "
+             "1 to 1e+09 N (a newton or more: the loads are divided by it, and the largest "
+             "slewing bearings' C is below 10^8 N), got 0 N")):
+        layout = good()
+        change(layout)
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said
+    # A thrust bearing (X 0, Y 1) is a bearing; one without a limiting speed says None.
+    layout = good()
+    supports({'bearing': {'C': 1e5, 'X': 0.0, 'Y': 1.0}}, {'bearing': {'C': 1e5}})(layout)
+    front, rear = parse_layout(layout).supports
+    assert (front.bearing.X, front.bearing.Y) == (0.0, 1.0) and rear.bearing.limit_speed is None
