@@ -174,3 +174,13 @@ def test_the_canonical_json_has_the_sites_numbering_only_when_given():
     assert set(sites) == fields | {'first_hole', 'numbering', 'rotation'}
     assert (sites['first_hole'], sites['numbering'], sites['rotation']) == \
         (math.radians(90), 'against_rotation', 'negative')
+
+
+def test_the_most_sites_and_sizes_are_read_and_none_is_refused_word_for_word():
+    """720 sites and 20 weight sizes a plane are read; no site at all is refused."""
+    most = {'I': {'angles_deg': [k * 0.5 for k in range(720)], 'radius': 0.5,
+                  'masses': [0.01 * (k + 1) for k in range(20)]}}
+    (sites,) = parse_layout(with_sites(most)).balancing.sites
+    assert len(sites.angles) == 720 and len(sites.masses) == 20
+    assert refusal({'I': dict(GOOD['I'], angles_deg=[])}) == (
+        'layout: field balancing.sites.I.angles_deg must be a list of 1 to 720 numbers, got []')

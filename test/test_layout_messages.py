@@ -18,8 +18,8 @@ import pytest
 
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.layout import (DEFAULT_GRADE, LayoutError, one_line, parse_layout,
-                                        plain_columns, short)
+from cvc_balance.physics.layout import (check_count, DEFAULT_GRADE, LayoutError, one_line,
+                                        parse_layout, plain_columns, short)
 
 
 def good():
@@ -448,3 +448,37 @@ def test_supports_and_bearings_refused_word_for_word():
     supports({'bearing': {'C': 1e5, 'X': 0.0, 'Y': 1.0}}, {'bearing': {'C': 1e5}})(layout)
     front, rear = parse_layout(layout).supports
     assert (front.bearing.X, front.bearing.Y) == (0.0, 1.0) and rear.bearing.limit_speed is None
+
+
+def test_the_limits_edges_and_what_is_said_first():
+    """At most 2 000 000 components, names of 200, ints at a limit; the name before components."""
+    check_count(1)
+    check_count(2_000_000)
+    with pytest.raises(LayoutError) as refused:
+        check_count(2_000_001)
+    assert str(refused.value) == ('layout: field components: 2000001 components, over the '
+                                  'limit of 2000000')
+    layout = good()
+    layout['name'] = 'n' * 200
+    layout['components'][1]['z'] = 10 ** 12                  # an int at the limit, 1e12 m
+    assert parse_layout(layout).components[1].z == 1e12
+    layout['name'] = 'n' * 201
+    layout['components'][1]['mass'] = -1.0                   # the name is said first
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ('layout: field name must be one line of at most 200 printable '
+                                  f"characters, got {short('n' * 201)}")
+    for field, value, said in (
+            ('angle', 2e9, 'angle must be within +-1e+09 rad (the reduction to a turn stays '
+             'exact), got 2e+09 rad'),
+            ('angle_deg', 1e11, 'angle_deg must be within +-5.72958e+10 deg (the reduction to '
+             'a turn stays exact), got 1e+11 deg')):
+        layout = good()
+        layout['components'][1].pop('angle_deg')
+        layout['components'][1][field] = value
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == f"component 'detector': field {said}"
+    ordered = good()
+    ordered['components'][0]['shape'] = OrderedDict(type='cylinder', radius=0.09, length=0.35)
+    assert parse_layout(ordered).components[0].shape.axis == 'axial'
