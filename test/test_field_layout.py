@@ -184,3 +184,25 @@ def test_the_most_sites_and_sizes_are_read_and_none_is_refused_word_for_word():
     assert len(sites.angles) == 720 and len(sites.masses) == 20
     assert refusal({'I': dict(GOOD['I'], angles_deg=[])}) == (
         'layout: field balancing.sites.I.angles_deg must be a list of 1 to 720 numbers, got []')
+
+
+def test_sites_with_the_supports_planes_and_a_long_description():
+    """Sites need two planes: two supports give them; one support is refused word for word."""
+    layout = with_sites(GOOD)
+    del layout['balancing']['planes']                       # the two supports' planes
+    assert len(parse_layout(layout).balancing.sites) == 2
+    layout['supports'] = layout['supports'][:1]
+    layout['supports'][0]['axial'] = True
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == (
+        'layout: field balancing.sites: weight sites need two correction planes (give '
+        'balancing.planes, or two supports)')
+    layout = gantry()
+    layout['description'] = 'd' * 20000
+    assert len(parse_layout(layout).description) == 20000
+    layout['description'] += 'd'
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ('layout: field description: 20001 characters, over the '
+                                  'limit of 20000')
