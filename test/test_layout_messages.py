@@ -482,3 +482,23 @@ def test_the_limits_edges_and_what_is_said_first():
     ordered = good()
     ordered['components'][0]['shape'] = OrderedDict(type='cylinder', radius=0.09, length=0.35)
     assert parse_layout(ordered).components[0].shape.axis == 'axial'
+
+
+def test_the_correction_radius_of_a_rotor_centred_on_its_axis():
+    """Every component on the axis: the largest half-extent of the shapes, from a micrometre."""
+    def radius(first, second):
+        layout = good()
+        layout['components'][0].update(first)
+        layout['components'][1].update(second)
+        return parse_layout(layout).correction_radius()
+    on_axis = {'radius': 0.0}
+    assert radius(on_axis, on_axis) == 0.175                  # the tube: 0.35 m long, / 2
+    sphere = {'radius': 0.0, 'shape': {'type': 'sphere', 'radius': 1e-6}}
+    assert radius(sphere, on_axis) == 1e-6                    # a micrometre: still a rim
+    layout = good()
+    del layout['components'][0]['shape']
+    layout['components'][0]['radius'] = 0.0
+    layout['components'][1]['radius'] = 1e-6                  # a micrometre off the axis
+    assert parse_layout(layout).correction_radius() == 1e-6
+    layout['components'][1]['radius'] = 0.0
+    assert parse_layout(layout).correction_radius() == 0.0    # no rim at all
