@@ -206,3 +206,11 @@ def test_sites_with_the_supports_planes_and_a_long_description():
         parse_layout(layout)
     assert str(refused.value) == ('layout: field description: 20001 characters, over the '
                                   'limit of 20000')
+
+
+def test_sites_angles_in_degrees_beyond_1e9_and_3e_9_rad_apart_are_read():
+    """angles_deg are held to the degrees' limit (5.7e10), and sites 3e-9 rad apart differ."""
+    sites = parse_layout(with_sites({'I': dict(GOOD['I'], angles_deg=[0, 2e9])})).balancing
+    assert sites.sites[0].angles == (0.0, math.radians(2e9))
+    near = {'I': {'angles': [0.0, 3e-9], 'radius': 0.5, 'masses': [0.1]}}
+    assert parse_layout(with_sites(near)).balancing.sites[0].angles == (0.0, 3e-9)

@@ -502,3 +502,22 @@ def test_the_correction_radius_of_a_rotor_centred_on_its_axis():
     assert parse_layout(layout).correction_radius() == 1e-6
     layout['components'][1]['radius'] = 0.0
     assert parse_layout(layout).correction_radius() == 0.0    # no rim at all
+
+
+def test_the_units_and_limits_of_each_kind_of_number():
+    """An int radius of 0 on a body; an inertia element's limit in kg m^2; a micrometre box."""
+    layout = good()
+    layout['components'][0]['radius'] = 0                     # an int at the low end
+    assert parse_layout(layout).components[0].radius == 0.0
+    layout = good()
+    del layout['components'][0]['shape']
+    layout['components'][0]['inertia'] = dict(ixx=1e13, iyy=1.0, izz=1.0, ixy=0.0, ixz=0.0,
+                                              iyz=0.0)
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ("component 'tube': field inertia.ixx must be within +-1e+12 "
+                                  'kg m^2 (products stay finite), got 1e+13 kg m^2')
+    layout = good()                                           # every component on the axis
+    layout['components'][0].update(radius=0.0, shape={'type': 'box', 'size': [1e-6] * 3})
+    layout['components'][1]['radius'] = 0.0
+    assert parse_layout(layout).correction_radius() == 0.0    # a rim of 0.5 um: none
