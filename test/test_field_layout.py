@@ -138,6 +138,10 @@ def test_the_sites_refusals_word_for_word():
         ({'I': dict(one, first_hole_angle_deg='north', numbering='with_rotation'),
           'rotation': 'positive'},
          f"{where}.I.first_hole_angle_deg must be a number, got 'north'"),
+        ({'I': dict(one, first_hole_angle_deg=1e11, numbering='with_rotation'),
+          'rotation': 'positive'},
+         f'{where}.I.first_hole_angle_deg must be within +-5.72958e+10 deg (the reduction to '
+         'a turn stays exact), got 1e+11 deg'),
         ({'I': dict(one, numbering='with_rotation'), 'rotation': 'positive'},
          f'{where}.I: give both first_hole_angle_deg and numbering, or neither'),
         ({'I': dict(one, stack=21)}, f'{where}.I.stack must be a whole number from 1 to 20, '

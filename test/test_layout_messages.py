@@ -509,6 +509,12 @@ def test_the_units_and_limits_of_each_kind_of_number():
     layout = good()
     layout['components'][0]['radius'] = 0                     # an int at the low end
     assert parse_layout(layout).components[0].radius == 0.0
+    layout['components'][0]['mass'] = 10 ** 13               # an int beyond the limit
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ("component 'tube': field mass must be from 1e-06 to 1e+12 kg "
+                                  '(a milligram or more: lighter is no part, and divides mass '
+                                  'ratios to inf), got 10000000000000 kg')
     layout = good()
     del layout['components'][0]['shape']
     layout['components'][0]['inertia'] = dict(ixx=1e13, iyy=1.0, izz=1.0, ixy=0.0, ixz=0.0,
