@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from cvc_balance.physics.motion import (_follows, accepted_motion, accepted_samples,
-                                        AccelerationEstimator, gate_samples, stamp_problem,
-                                        stamp_seconds, StampGate)
+                                        AccelerationEstimator, gate_samples, LINE_SLEW,
+                                        stamp_problem, stamp_seconds, StampGate)
 
 DAYS_11_6 = 11.6 * 86400.0
 
@@ -240,3 +240,12 @@ def test_stamps_in_seconds_and_what_follows_by_hand():
     assert not _follows((0.0, 0.0), 0.3, 0.1, 0.1)          # more: 0.3 > 0.1 + 0.1
     assert not _follows((1.0, 0.0), 1.0, 0.1, 0.1)          # the same stamp again
     assert not _follows((0.0, 0.5), 0.15, 0.0, 0.1)         # received earlier: gap 0
+
+
+def test_the_line_follows_the_stamps_offset_by_the_slew_at_most():
+    """On the line the offset stays; off it by more than the slew it moves the slew per s."""
+    gate = StampGate(max_jump=1.0)
+    assert gate.check(100.0, 0.0) is None and gate.offset == 100.0
+    assert gate.check(101.0, 1.0) is None and gate.offset == 100.0       # t - r = 100
+    assert gate.check(101.5, 2.0) is None                                # t - r = 99.5
+    assert gate.offset == 100.0 - LINE_SLEW                              # one second's slew
