@@ -110,3 +110,111 @@ def test_bad_sites_on_the_command_line(tmp_path):
     assert done.returncode == 2 and done.stdout == ''
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and 'balancing.sites.I.stack' in lines[0]
+
+
+def refusal(sites):
+    """Return the one line a layout with these weight sites is refused with."""
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(with_sites(sites))
+    return str(refused.value)
+
+
+def test_the_sites_refusals_word_for_word():
+    """Each refusal of balancing.sites in the exact words the user reads."""
+    where = 'layout: field balancing.sites'
+    one = GOOD['I']
+    known = 'angles, angles_deg, radius, masses, stack, first_hole_angle_deg, numbering'
+    cases = [
+        ({'I': one, 'rotation': 'up'},
+         f"{where}.rotation must be one of positive, negative, got 'up'"),
+        ({'I': dict(one, first_hole_angle_deg=90, numbering='with_rotation')},
+         f'{where}.I.numbering counts with or against the rotation: give {where}.rotation '
+         '(positive: rotor X toward rotor Y)'),
+        ({'I': dict(one, first_hole_angle_deg=90, numbering='sideways'), 'rotation': 'positive'},
+         f"{where}.I.numbering must be one of with_rotation, against_rotation, got 'sideways'"),
+        ({'I': dict(one, first_hole_angle_deg=7, numbering='with_rotation'),
+          'rotation': 'positive'},
+         f'{where}.I.first_hole_angle_deg: no site at 7 deg (hole 1 is one of the sites)'),
+        ({'I': dict(one, first_hole_angle_deg='north', numbering='with_rotation'),
+          'rotation': 'positive'},
+         f"{where}.I.first_hole_angle_deg must be a number, got 'north'"),
+        ({'I': dict(one, first_hole_angle_deg=1e11, numbering='with_rotation'),
+          'rotation': 'positive'},
+         f'{where}.I.first_hole_angle_deg must be within +-5.72958e+10 deg (the reduction to '
+         'a turn stays exact), got 1e+11 deg'),
+        ({'I': dict(one, numbering='with_rotation'), 'rotation': 'positive'},
+         f'{where}.I: give both first_hole_angle_deg and numbering, or neither'),
+        ({'I': dict(one, stack=21)}, f'{where}.I.stack must be a whole number from 1 to 20, '
+         'got 21'),
+        ({'I': {'angles': [0.0, 2.0], 'masses': [0.1]}}, f'{where}.I: missing field radius'),
+        ({'I': {'angles': [0.0, 2.0], 'radius': 0.5}}, f'{where}.I: missing field masses'),
+        ({'I': [1]}, f'{where}.I: expected a mapping of fields, got list'),
+        ({'I': dict(one, colour='red')}, f"{where}.I: unknown field 'colour' (known: {known})"),
+        ({'III': one}, f"{where}: unknown field 'III' (known: I, II, rotation)"),
+        ({'I': {'angles': [0.0, 1e10], 'radius': 0.5, 'masses': [0.1]}},
+         f'{where}.I.angles[1] must be within +-1e+09 rad (the reduction to a turn stays '
+         'exact), got 1e+10 rad'),
+        ({'I': {'angles': [0.0, 2 * math.pi - 1e-10], 'radius': 0.5, 'masses': [0.1]}},
+         f'{where}.I.angles: two sites at the same angle'),          # across the turn
+    ]
+    for sites, said in cases:
+        assert refusal(sites) == said, sites
+    # Accepted at the edges: 20 stacked, hole 1 given a turn away from its site.
+    layout = parse_layout(with_sites({'I': dict(one, stack=20, first_hole_angle_deg=360,
+                                                numbering='with_rotation'),
+                                      'rotation': 'positive'}))
+    assert layout.balancing.sites[0].stack == 20 and layout.balancing.sites[0].first_hole == 0.0
+
+
+def test_the_canonical_json_has_the_sites_numbering_only_when_given():
+    """Fields added later (first_hole, numbering, rotation) are written only when given."""
+    plain = json.loads(parse_layout(with_sites(GOOD)).canonical_json())
+    fields = {'angles', 'masses', 'plane', 'radius', 'stack'}
+    assert [set(s) for s in plain['balancing']['sites']] == [fields, fields]
+    numbered = json.loads(parse_layout(with_sites({
+        'I': dict(GOOD['I'], first_hole_angle_deg=90, numbering='against_rotation'),
+        'rotation': 'negative'})).canonical_json())
+    (sites,) = numbered['balancing']['sites']
+    assert set(sites) == fields | {'first_hole', 'numbering', 'rotation'}
+    assert (sites['first_hole'], sites['numbering'], sites['rotation']) == \
+        (math.radians(90), 'against_rotation', 'negative')
+
+
+def test_the_most_sites_and_sizes_are_read_and_none_is_refused_word_for_word():
+    """720 sites and 20 weight sizes a plane are read; no site at all is refused."""
+    most = {'I': {'angles_deg': [k * 0.5 for k in range(720)], 'radius': 0.5,
+                  'masses': [0.01 * (k + 1) for k in range(20)]}}
+    (sites,) = parse_layout(with_sites(most)).balancing.sites
+    assert len(sites.angles) == 720 and len(sites.masses) == 20
+    assert refusal({'I': dict(GOOD['I'], angles_deg=[])}) == (
+        'layout: field balancing.sites.I.angles_deg must be a list of 1 to 720 numbers, got []')
+
+
+def test_sites_with_the_supports_planes_and_a_long_description():
+    """Sites need two planes: two supports give them; one support is refused word for word."""
+    layout = with_sites(GOOD)
+    del layout['balancing']['planes']                       # the two supports' planes
+    assert len(parse_layout(layout).balancing.sites) == 2
+    layout['supports'] = layout['supports'][:1]
+    layout['supports'][0]['axial'] = True
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == (
+        'layout: field balancing.sites: weight sites need two correction planes (give '
+        'balancing.planes, or two supports)')
+    layout = gantry()
+    layout['description'] = 'd' * 20000
+    assert len(parse_layout(layout).description) == 20000
+    layout['description'] += 'd'
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ('layout: field description: 20001 characters, over the '
+                                  'limit of 20000')
+
+
+def test_sites_angles_in_degrees_beyond_1e9_and_3e_9_rad_apart_are_read():
+    """angles_deg are held to the degrees' limit (5.7e10), and sites 3e-9 rad apart differ."""
+    sites = parse_layout(with_sites({'I': dict(GOOD['I'], angles_deg=[0, 2e9])})).balancing
+    assert sites.sites[0].angles == (0.0, math.radians(2e9))
+    near = {'I': {'angles': [0.0, 3e-9], 'radius': 0.5, 'masses': [0.1]}}
+    assert parse_layout(with_sites(near)).balancing.sites[0].angles == (0.0, 3e-9)

@@ -425,3 +425,14 @@ def test_plausibility_warnings_come_the_same_from_columns():
     assert isinstance(layout.components, ComponentTable)
     warnings = layout_warnings(layout)
     assert warnings == layout_warnings(as_tuple(layout)) and len(warnings) == 3, warnings
+
+
+def test_a_table_of_integer_columns_and_a_small_body_writes_what_json_writes():
+    """Integer columns are held as floats; a body's 1e-5 kg m^2, which msgspec writes otherwise."""
+    from cvc_balance.physics.layout import Component, point_mass
+    body = Component('b', 2.0, 0.5, 0.25, 0.0, None, (1e-5, 2e-5, 3e-5, 1e-6, 1e-6, 1e-6))
+    table = ComponentTable(['a', 'b'], ([1, 2], [3, 0], [0, 0], [0, 0]), {1: body})
+    want = json.dumps([asdict(point_mass('a', 1.0, 3.0, 0.0, 0.0)), asdict(body)],
+                      sort_keys=True, separators=(',', ':'))
+    assert table.canonical_json().decode() == want
+    assert '"mass":1.0' in want and '1e-05' in want

@@ -8,6 +8,7 @@ mutation run (benchmarks/mutation.py) can afford them; test_layout.py checks the
 line's exit code and single line for the same kinds of mistake.
 """
 
+from collections import OrderedDict
 import hashlib
 import json
 import math
@@ -17,7 +18,8 @@ import pytest
 
 from cvc_balance.physics.assessment import assess_balance
 from cvc_balance.physics.engine import RotorModel
-from cvc_balance.physics.layout import DEFAULT_GRADE, LayoutError, one_line, parse_layout
+from cvc_balance.physics.layout import (check_count, DEFAULT_GRADE, LayoutError, one_line,
+                                        parse_layout, plain_columns, short)
 
 
 def good():
@@ -340,3 +342,188 @@ def test_one_line_joins_the_lines_and_cuts_at_the_limit():
     assert one_line(words, 20) == 'word word word word ... (499 characters)'
     assert one_line('w' * 300) == 'w' * 300                   # the default limit: whole
     assert one_line('w' * 301) == 'w' * 300 + '... (301 characters)'
+
+
+def test_point_masses_of_the_wrong_types_are_refused_not_taken_fast():
+    """The fast path for plain point masses takes only str names and float or int numbers."""
+    plain = {'name': 'a', 'mass': 1.0, 'radius': 0.5, 'angle': 0.0, 'z': 0.1}
+    for change, said in (
+            ({'name': 5}, 'component #1: field name must be a non-empty string, got 5'),
+            ({'name': ''}, "component #1: field name must be a non-empty string, got ''"),
+            ({'radius': '0.5'}, "component 'a': field radius must be a number, got '0.5'"),
+            ({'z': '0.1'}, "component 'a': field z must be a number, got '0.1'")):
+        layout = good()
+        layout['components'] = [dict(plain, **change)]
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said, change
+
+
+def test_shapes_of_the_wrong_sizes_are_refused_and_any_mapping_is_read():
+    """A cylinder's radius as a list, a box of 4 sizes: refused; an OrderedDict as a dict."""
+    for shape, said in (
+            ({'type': 'cylinder', 'radius': [0.1, 0.1, 0.1], 'length': 0.3},
+             "component 'tube': field shape.radius must be a number, got [0.1, 0.1, 0.1]"),
+            ({'type': 'box', 'size': [0.1, 0.2, 0.3, 0.4]},
+             "component 'tube': field shape.size must be a list of 3 numbers, got "
+             '[0.1, 0.2, 0.3, 0.4]')):
+        layout = good()
+        layout['components'][0]['shape'] = shape
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said, shape
+    ordered = good()
+    ordered['components'][0]['shape'] = OrderedDict(ordered['components'][0]['shape'])
+    assert parse_layout(ordered) == parse_layout(good())
+    assert parse_layout(ordered).components[0].shape.axis == 'tangential'
+
+
+def test_plain_columns_says_false_for_anything_the_careful_reader_would_name():
+    """Names non-empty, at most 200 printable characters, unique; numbers within limits."""
+    def columns(names, mass=1.0):
+        n = len(names)
+        return (names, np.full(n, mass), np.full(n, 0.5), np.zeros(n), np.zeros(n))
+    assert plain_columns(*columns(['a', 'b'])) is True
+    assert plain_columns(*columns(['a', 'b' * 200])) is True
+    for names, mass in ((['a', ''], 1.0), (['a', 'b' * 201], 1.0), (['a', 'b\n'], 1.0),
+                        (['a', 'a'], 1.0), (['a', 'b'], math.nan), ([], 1.0)):
+        assert plain_columns(*columns(names, mass)) is False, (names, mass)
+
+
+def test_short_shows_a_value_in_at_most_about_40_characters():
+    """Short lists of short scalars printed, containers described, the rest cut (by hand)."""
+    big = 1234567890
+    cases = [
+        ([0.0, -9.8], '[0.0, -9.8]'),
+        ([1, 2, 3, 4, 5, 6], '[1, 2, 3, 4, 5, 6]'),
+        ([1, 2, 3, 4, 5, 6, 7], 'a list of 7 items'),
+        ([big, big, big, 12], '[1234567890, 1234567890, 1234567890, 12]'),    # 40: whole
+        ([big, big, big, 123], 'a list of 4 items'),                           # 41
+        ([{'a': 1}], 'a list of 1 items'), ([[1]], 'a list of 1 items'),
+        ([2 ** 63], '[9223372036854775808]'), ([2 ** 64], 'a list of 1 items'),
+        (['a' * 20], "['" + 'a' * 20 + "']"), (['a' * 21], 'a list of 1 items'),
+        (2 ** 127, str(2 ** 127)),                                             # 39 digits
+        (2 ** 128, 'an integer of about 39 digits'),
+        ('a' * 38, "'" + 'a' * 38 + "'"),                                      # 40: whole
+        ('a' * 39, "'" + 'a' * 39 + '...'),
+        ('a' * 40, "'" + 'a' * 39 + '...'),
+        ('a' * 41, "'" + 'a' * 40 + "'... (41 characters)"),
+    ]
+    for value, said in cases:
+        assert short(value) == said, value
+
+
+def test_supports_and_bearings_refused_word_for_word():
+    """A support's name, the supports' and the planes' spacing, a bearing: the exact words."""
+    spacing = ('must be from 0.001 to 2e+12 m (a millimetre or more: closer is one bearing or '
+               'plane, and moments are divided by the spacing), got 0.0005 m')
+    long_name = 'a' * 201
+
+    def supports(front, rear=None):
+        return lambda layout: layout.update(supports=[
+            dict({'name': 'front', 'z': -0.25}, **front),
+            dict({'name': 'rear', 'z': 0.25, 'axial': True}, **(rear or {}))])
+    for change, said in (
+            (supports({'name': '1front'}), "support '1front': field name must be a ROS name "
+             'token (letters, digits and _, not starting with a digit): it names the topic '
+             'supports/<name>/load'),
+            (supports({'name': long_name}), f"support {short(long_name)}: field name must be "
+             f'one line of at most 200 printable characters, got {short(long_name)}'),
+            (supports({'z': 0.0}, {'z': 0.0005}),
+             f'layout: field supports: the spacing of the two supports {spacing}'),
+            (lambda layout: layout.update(balancing={'planes': [0.0, 0.0005]}),
+             f'layout: field balancing.planes: the spacing z_II - z_I {spacing}'),
+            (supports({'bearing': 3.0}),
+             "support 'front': field bearing: expected a mapping of fields, got float"),
+            (supports({'bearing': {'C': 0.0}}), "support 'front': field bearing.C must be from "
+             "1 to 1e+09 N (a newton or more: the loads are divided by it, and the largest "
+             "slewing bearings' C is below 10^8 N), got 0 N")):
+        layout = good()
+        change(layout)
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == said
+    # A thrust bearing (X 0, Y 1) is a bearing; one without a limiting speed says None.
+    layout = good()
+    supports({'bearing': {'C': 1e5, 'X': 0.0, 'Y': 1.0}}, {'bearing': {'C': 1e5}})(layout)
+    front, rear = parse_layout(layout).supports
+    assert (front.bearing.X, front.bearing.Y) == (0.0, 1.0) and rear.bearing.limit_speed is None
+
+
+def test_the_limits_edges_and_what_is_said_first():
+    """At most 2 000 000 components, names of 200, ints at a limit; the name before components."""
+    check_count(1)
+    check_count(2_000_000)
+    with pytest.raises(LayoutError) as refused:
+        check_count(2_000_001)
+    assert str(refused.value) == ('layout: field components: 2000001 components, over the '
+                                  'limit of 2000000')
+    layout = good()
+    layout['name'] = 'n' * 200
+    layout['components'][1]['z'] = 10 ** 12                  # an int at the limit, 1e12 m
+    assert parse_layout(layout).components[1].z == 1e12
+    layout['name'] = 'n' * 201
+    layout['components'][1]['mass'] = -1.0                   # the name is said first
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ('layout: field name must be one line of at most 200 printable '
+                                  f"characters, got {short('n' * 201)}")
+    for field, value, said in (
+            ('angle', 2e9, 'angle must be within +-1e+09 rad (the reduction to a turn stays '
+             'exact), got 2e+09 rad'),
+            ('angle_deg', 1e11, 'angle_deg must be within +-5.72958e+10 deg (the reduction to '
+             'a turn stays exact), got 1e+11 deg')):
+        layout = good()
+        layout['components'][1].pop('angle_deg')
+        layout['components'][1][field] = value
+        with pytest.raises(LayoutError) as refused:
+            parse_layout(layout)
+        assert str(refused.value) == f"component 'detector': field {said}"
+    ordered = good()
+    ordered['components'][0]['shape'] = OrderedDict(type='cylinder', radius=0.09, length=0.35)
+    assert parse_layout(ordered).components[0].shape.axis == 'axial'
+
+
+def test_the_correction_radius_of_a_rotor_centred_on_its_axis():
+    """Every component on the axis: the largest half-extent of the shapes, from a micrometre."""
+    def radius(first, second):
+        layout = good()
+        layout['components'][0].update(first)
+        layout['components'][1].update(second)
+        return parse_layout(layout).correction_radius()
+    on_axis = {'radius': 0.0}
+    assert radius(on_axis, on_axis) == 0.175                  # the tube: 0.35 m long, / 2
+    sphere = {'radius': 0.0, 'shape': {'type': 'sphere', 'radius': 1e-6}}
+    assert radius(sphere, on_axis) == 1e-6                    # a micrometre: still a rim
+    layout = good()
+    del layout['components'][0]['shape']
+    layout['components'][0]['radius'] = 0.0
+    layout['components'][1]['radius'] = 1e-6                  # a micrometre off the axis
+    assert parse_layout(layout).correction_radius() == 1e-6
+    layout['components'][1]['radius'] = 0.0
+    assert parse_layout(layout).correction_radius() == 0.0    # no rim at all
+
+
+def test_the_units_and_limits_of_each_kind_of_number():
+    """An int radius of 0 on a body; an inertia element's limit in kg m^2; a micrometre box."""
+    layout = good()
+    layout['components'][0]['radius'] = 0                     # an int at the low end
+    assert parse_layout(layout).components[0].radius == 0.0
+    layout['components'][0]['mass'] = 10 ** 13               # an int beyond the limit
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ("component 'tube': field mass must be from 1e-06 to 1e+12 kg "
+                                  '(a milligram or more: lighter is no part, and divides mass '
+                                  'ratios to inf), got 10000000000000 kg')
+    layout = good()
+    del layout['components'][0]['shape']
+    layout['components'][0]['inertia'] = dict(ixx=1e13, iyy=1.0, izz=1.0, ixy=0.0, ixz=0.0,
+                                              iyz=0.0)
+    with pytest.raises(LayoutError) as refused:
+        parse_layout(layout)
+    assert str(refused.value) == ("component 'tube': field inertia.ixx must be within +-1e+12 "
+                                  'kg m^2 (products stay finite), got 1e+13 kg m^2')
+    layout = good()                                           # every component on the axis
+    layout['components'][0].update(radius=0.0, shape={'type': 'box', 'size': [1e-6] * 3})
+    layout['components'][1]['radius'] = 0.0
+    assert parse_layout(layout).correction_radius() == 0.0    # a rim of 0.5 um: none

@@ -16,9 +16,9 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from cvc_balance.physics.motion import (accepted_motion, accepted_samples,
-                                        AccelerationEstimator, gate_samples, stamp_problem,
-                                        StampGate)
+from cvc_balance.physics.motion import (_follows, accepted_motion, accepted_samples,
+                                        AccelerationEstimator, gate_samples, LINE_SLEW,
+                                        stamp_problem, stamp_seconds, StampGate)
 
 DAYS_11_6 = 11.6 * 86400.0
 
@@ -230,3 +230,22 @@ def test_replay_restarts_alpha_where_the_time_line_restarts():
     np.testing.assert_allclose(alpha, expected, rtol=1e-10, atol=1e-12)
     assert alpha[200] == 0.0 and alpha[-1] == pytest.approx(2.0, rel=1e-9)
     assert alpha[199] == pytest.approx(0.5, rel=1e-9)
+
+
+def test_stamps_in_seconds_and_what_follows_by_hand():
+    """A stamp is its nanoseconds times 1e-9; a sample follows when 0 < step <= gap + jump."""
+    assert stamp_seconds(2, 0) == 2.0 and stamp_seconds(0, 250_000_000) == 0.25
+    assert stamp_seconds(1_700_000_000, 123) == 1_700_000_000_000_000_123 * 1e-9
+    assert _follows((0.0, 0.0), 0.2, 0.1, 0.1)              # a step of gap + jump exactly
+    assert not _follows((0.0, 0.0), 0.3, 0.1, 0.1)          # more: 0.3 > 0.1 + 0.1
+    assert not _follows((1.0, 0.0), 1.0, 0.1, 0.1)          # the same stamp again
+    assert not _follows((0.0, 0.5), 0.15, 0.0, 0.1)         # received earlier: gap 0
+
+
+def test_the_line_follows_the_stamps_offset_by_the_slew_at_most():
+    """On the line the offset stays; off it by more than the slew it moves the slew per s."""
+    gate = StampGate(max_jump=1.0)
+    assert gate.check(100.0, 0.0) is None and gate.offset == 100.0
+    assert gate.check(101.0, 1.0) is None and gate.offset == 100.0       # t - r = 100
+    assert gate.check(101.5, 2.0) is None                                # t - r = 99.5
+    assert gate.offset == 100.0 - LINE_SLEW                              # one second's slew
