@@ -5,11 +5,12 @@ The node subscribes with these, ``play`` publishes with them and ``record`` and 
 node's own recording note them in the bag (rosbag2's ``offered_qos_profiles``).
 """
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from rclpy.qos import ReliabilityPolicy
 
-LAYOUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                        reliability=ReliabilityPolicy.RELIABLE,
+# A QoSProfile given a depth keeps the last that many (KEEP_LAST) and is VOLATILE unless
+# told otherwise: those defaults are not written out.
+LAYOUT_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 OUTPUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -26,6 +27,4 @@ def input_qos(depth):
     node's layout thread under load, 200 lost 2-8 % of 9000 samples and 1000 (the
     default) 1.
     """
-    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
-                      reliability=qos_profile_sensor_data.reliability,
-                      durability=qos_profile_sensor_data.durability)
+    return QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability)
