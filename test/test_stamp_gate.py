@@ -108,6 +108,11 @@ def test_stamps_unset_or_beyond_a_second_of_nanoseconds_are_refused():
     assert stamp_problem(-1, 5) == 'stamp -1.000000005 s: unset (0) or before 0'
     assert stamp_problem(0, 1) is None and stamp_problem(17, 999_999_999) is None
     assert accepted([(0.0, 1.0), (0.001, 1.001), (0.002, 1.002)]) == [False, True, True]
+    # The vectorised gate too: these stamps agree with one another and with the receive
+    # clock (one line, no jump), so only the rule itself refuses the first.
+    ok, restarted = gate_samples(np.array([0.0, 0.001, 0.002]), np.zeros(3), np.ones(3), 10.0,
+                                 1.0, np.array([1.0, 1.001, 1.002]))
+    assert ok.tolist() == [False, True, True] and restarted.tolist() == [False] * 3
 
 
 def test_a_sample_after_a_pause_is_not_lost():
@@ -249,3 +254,18 @@ def test_the_line_follows_the_stamps_offset_by_the_slew_at_most():
     assert gate.check(101.0, 1.0) is None and gate.offset == 100.0       # t - r = 100
     assert gate.check(101.5, 2.0) is None                                # t - r = 99.5
     assert gate.offset == 100.0 - LINE_SLEW                              # one second's slew
+
+
+def test_stamps_that_creep_ahead_in_steps_each_allowed_are_refused_when_vectorised():
+    """
+    Check a run whose every step is allowed, but whose stamps creep ahead of the line.
+
+    By hand, max_jump 1 s: stamps 1, 4.9, 8.8 s received at 6, 9, 12 s. The line starts
+    at offset 1 - 6 = -5 s; the second stamp leads it by (4.9 - 9) + 5 = 0.9 s (taken;
+    the line follows by the slew, 0.01 x 3 s, to -4.97 s); the third leads by
+    (8.8 - 12) + 4.97 = 1.77 s: refused. Each step, 3.9 s, is within the 3 s received
+    plus 1 s, so only the offsets' spread (1.8 s) says the fast path may not be taken.
+    """
+    ok, restarted = gate_samples(np.array([1.0, 4.9, 8.8]), np.zeros(3), np.ones(3), 10.0,
+                                 1.0, np.array([6.0, 9.0, 12.0]))
+    assert ok.tolist() == [True, True, False] and restarted.tolist() == [False] * 3
