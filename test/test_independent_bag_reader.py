@@ -439,18 +439,8 @@ def top_level(data):
 
 def stream_messages(data, topic='/joint_states'):
     """(log time, bytes) of ``topic``'s messages the mcap library's stream reader reads."""
-    from mcap.records import Channel, Message
-    from mcap.stream_reader import StreamReader
-    out, topics = [], {}
-    try:
-        for r in StreamReader(io.BytesIO(data)).records:
-            if isinstance(r, Channel):
-                topics[r.id] = r.topic
-            elif isinstance(r, Message) and topics[r.channel_id] == topic:
-                out.append((r.log_time, bytes(r.data)))
-    except Exception as error:                  # the end of a cut file
-        assert type(error).__name__ == 'EndOfFile', error
-    return out
+    from mcap.exceptions import EndOfFile
+    return read_before_the_cut(data, topic, ends=(EndOfFile,))
 
 
 @pytest.fixture(scope='module')
@@ -546,8 +536,13 @@ def ours(path, topic='/n'):
     return bag, bag.messages(bag.channel(topic, STRING))
 
 
-def read_before_the_cut(data, topic='/n'):
-    """(log time, bytes) of ``topic`` the mcap library's stream reader reads before the cut."""
+def read_before_the_cut(data, topic='/n', ends=None):
+    """
+    Return (log time, bytes) of ``topic`` the mcap library's stream reader reads before the cut.
+
+    ``ends``: the errors that say where the file ends (default: the end of the file, or a
+    record cut short).
+    """
     from mcap.exceptions import EndOfFile
     from mcap.records import Channel, Message
     from mcap.stream_reader import StreamReader
@@ -558,7 +553,7 @@ def read_before_the_cut(data, topic='/n'):
                 topics[r.id] = r.topic
             elif isinstance(r, Message) and topics[r.channel_id] == topic:
                 out.append((r.log_time, bytes(r.data)))
-    except (EndOfFile, struct.error):            # where the file ends
+    except ends or (EndOfFile, struct.error):            # where the file ends
         pass
     return out
 

@@ -324,19 +324,24 @@ def test_empty_bag(tmp_path):
         [SUMMARY_OFFSET] * 5 + [FOOTER]
 
 
-@pytest.mark.parametrize('level', [None, 9])
-def test_zstd_chunks_are_zstandards_compression_of_their_records(level, tmp_path):
-    """Each chunk's bytes: zstandard's at the level given, else at level 1 (libmcap's)."""
-    import zstandard
-    path = tmp_path / 'z.mcap'
+def chunks_of_notes(path, compression, level):
+    """Return the chunks (by hand) of 8 notes written at ``path`` in chunks of 2 KiB: 2 or more."""
     text = ' '.join(f'{k * k}' for k in range(400))
-    with BagWriter(path, compression='zstd', level=level, chunk_bytes=2048) as writer:
+    with BagWriter(path, compression=compression, level=level, chunk_bytes=2048) as writer:
         note = writer.add_channel('/note', STRING)
         for k in range(8):
             writer.write(note, k, string_message(text[k * 200:(k + 1) * 300]))
     chunks = [chunk_by_hand(body) for _, op, body in records_by_hand(path.read_bytes())
               if op == CHUNK]
     assert len(chunks) >= 2
+    return chunks
+
+
+@pytest.mark.parametrize('level', [None, 9])
+def test_zstd_chunks_are_zstandards_compression_of_their_records(level, tmp_path):
+    """Each chunk's bytes: zstandard's at the level given, else at level 1 (libmcap's)."""
+    import zstandard
+    chunks = chunks_of_notes(tmp_path / 'z.mcap', 'zstd', level)
     for _, _, size, crc, compression, data in chunks:
         inner = zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
         assert compression == 'zstd' and len(inner) == size and crc == zlib.crc32(inner)
@@ -348,15 +353,7 @@ def test_zstd_chunks_are_zstandards_compression_of_their_records(level, tmp_path
 def test_lz4_chunks_are_lz4_frames_of_their_records(level, tmp_path):
     """Each chunk: an lz4 frame at the level given (else 0) that states its content size."""
     import lz4.frame
-    path = tmp_path / 'l.mcap'
-    text = ' '.join(f'{k * k}' for k in range(400))
-    with BagWriter(path, compression='lz4', level=level, chunk_bytes=2048) as writer:
-        note = writer.add_channel('/note', STRING)
-        for k in range(8):
-            writer.write(note, k, string_message(text[k * 200:(k + 1) * 300]))
-    chunks = [chunk_by_hand(body) for _, op, body in records_by_hand(path.read_bytes())
-              if op == CHUNK]
-    assert len(chunks) >= 2
+    chunks = chunks_of_notes(tmp_path / 'l.mcap', 'lz4', level)
     for _, _, size, crc, compression, data in chunks:
         inner = lz4.frame.decompress(data)
         assert compression == 'lz4' and len(inner) == size and crc == zlib.crc32(inner)
