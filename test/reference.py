@@ -187,20 +187,30 @@ def planes_by_hand(layout):
     ISO 21940-2's lever rule over a layout mapping with ``balancing.planes`` and each
     component's ``angle_deg``.
     """
-    z_i, z_ii = layout['balancing']['planes']
-    planes = [0j, 0j]
-    for c in layout['components']:
+    return component_planes_by_hand(layout['components'], layout['balancing']['planes'])
+
+
+def component_planes_by_hand(components, planes):
+    """
+    Return plane I and II unbalance (kg m, complex) of point components (mappings).
+
+    ISO 21940-2's lever rule: planes at z = ``planes`` (m); each component's ``mass``,
+    ``radius``, ``angle_deg`` and ``z`` (0 if not given).
+    """
+    z_i, z_ii = planes
+    out = [0j, 0j]
+    for c in components:
         u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
-        planes[0] += u * (z_ii - c['z']) / (z_ii - z_i)
-        planes[1] += u * (c['z'] - z_i) / (z_ii - z_i)
-    return planes
+        out[0] += u * (z_ii - c.get('z', 0.0)) / (z_ii - z_i)
+        out[1] += u * (c.get('z', 0.0) - z_i) / (z_ii - z_i)
+    return out
 
 
 def shares_by_hand(layout):
     """Return each plane's permissible share (kg m) at the service speed (ISO 21940-11)."""
     z_i, z_ii = layout['balancing']['planes']
     mass = sum(c['mass'] for c in layout['components'])
-    z_com = sum(c['mass'] * c['z'] for c in layout['components']) / mass
+    z_com = sum(c['mass'] * c.get('z', 0.0) for c in layout['components']) / mass
     u_per = layout['balancing']['grade'] * 1e-3 * mass / layout['balancing']['service_speed']
     return [u_per * min(max(lever, 0.3), 0.7)
             for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]

@@ -24,34 +24,12 @@ from rosbags.highlevel import AnyReader
 import yaml
 
 from cvc_balance.fleet import run_fleet, simulate_fleet
+from reference import component_planes_by_hand, shares_by_hand
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT = ROOT / 'config' / 'ct_gantry.yaml'
 MACHINES, RUNS = 6, 4
 CHI2_95 = 5.991464547107979
-
-
-def planes_by_hand(components, planes):
-    """Plane I and II unbalance (kg m, complex) of point components (ISO 21940-2)."""
-    z_i, z_ii = planes
-    out = [0j, 0j]
-    for c in components:
-        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
-        out[0] += u * (z_ii - c.get('z', 0.0)) / (z_ii - z_i)
-        out[1] += u * (c.get('z', 0.0) - z_i) / (z_ii - z_i)
-    return out
-
-
-def shares_by_hand(layout):
-    """Each plane's permissible share (kg m) at the service speed (ISO 21940-11)."""
-    z_i, z_ii = layout['balancing']['planes']
-    components = layout['components']
-    mass = sum(c['mass'] for c in components)
-    z_com = sum(c['mass'] * c.get('z', 0.0) for c in components) / mass
-    balancing = layout['balancing']
-    u_per = balancing['grade'] * 1e-3 * mass / balancing['service_speed']
-    return [u_per * min(max(lever, 0.3), 0.7)
-            for lever in ((z_ii - z_com) / (z_ii - z_i), (z_com - z_i) / (z_ii - z_i))]
 
 
 def vector(row, prefix, angle=None):
@@ -123,7 +101,7 @@ def test_the_layouts_planes_shares_and_grade_by_hand(fleet):
         for run in plan.runs:
             row = rows[str(run.path)]
             layout = run.declared
-            planes = planes_by_hand(layout['components'], layout['balancing']['planes'])
+            planes = component_planes_by_hand(layout['components'], layout['balancing']['planes'])
             shares = shares_by_hand(layout)
             for p, u, share in zip(('I', 'II'), planes, shares):
                 # Measured: 1.1e-13 relative (the engine sums compensated, these plainly).
@@ -153,8 +131,8 @@ def test_the_identified_rotor_is_the_true_one_within_its_circles(fleet):
             row = rows[str(run.path)]
             layout = run.declared
             planes = layout['balancing']['planes']
-            true = planes_by_hand(run.true_components, planes)
-            declared = planes_by_hand(layout['components'], planes)
+            true = component_planes_by_hand(run.true_components, planes)
+            declared = component_planes_by_hand(layout['components'], planes)
             shares = shares_by_hand(layout)
             assert row['identifiable'] and row['verdict_source'] == 'measured'
             found = []
@@ -189,11 +167,11 @@ def test_the_residual_is_what_the_layout_misses(fleet):
         for run in plan.runs:
             row = rows[str(run.path)]
             planes = run.declared['balancing']['planes']
-            missed = [t - d for t, d in zip(planes_by_hand(run.true_components, planes),
-                                            planes_by_hand(run.declared['components'],
-                                                           planes))]
+            true = component_planes_by_hand(run.true_components, planes)
+            declared = component_planes_by_hand(run.declared['components'], planes)
+            missed = [t - d for t, d in zip(true, declared)]
             if plan.kind == 'steady':
-                as_built = planes_by_hand([plan.as_built], planes)
+                as_built = component_planes_by_hand([plan.as_built], planes)
                 assert np.allclose(missed, as_built, rtol=0, atol=1e-15)
             for k, p in enumerate(('I', 'II')):
                 off = vector(row, f'residual_plane_{p}_g_mm')

@@ -29,6 +29,7 @@ from cvc_balance.physics.engine import RotorModel
 from cvc_balance.physics.layout import parse_layout
 from cvc_balance.ros.load_cells import LoadCells
 from independent import PinocchioRotor
+from reference import component_planes_by_hand
 
 ROOT = Path(__file__).resolve().parents[1]
 GANTRY = yaml.safe_load((ROOT / 'config' / 'ct_gantry.yaml').read_text())
@@ -65,17 +66,6 @@ def true_layout(base=GANTRY):
     true = copy.deepcopy(base)
     true['components'].append(dict(HIDDEN))
     return true
-
-
-def planes_by_hand(components, planes):
-    """Plane I and II unbalance (kg m, complex) of point components (ISO 21940-2)."""
-    z_i, z_ii = planes
-    out = [0j, 0j]
-    for c in components:
-        u = c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
-        out[0] += u * (z_ii - c.get('z', 0.0)) / (z_ii - z_i)
-        out[1] += u * (c.get('z', 0.0) - z_i) / (z_ii - z_i)
-    return out
 
 
 def run(cells, turns, base=GANTRY, read=None):
@@ -218,8 +208,8 @@ def test_the_cells_status_says_the_measured_rotor_and_what_its_layout_misses():
         (z_com - planes[0]) / (planes[1] - planes[0]))]
     static = sum(c['mass'] * c['radius'] * cmath.exp(1j * math.radians(c['angle_deg']))
                  for c in true['components'])
-    found = planes_by_hand(true['components'], planes)
-    missed = planes_by_hand([HIDDEN], planes)
+    found = component_planes_by_hand(true['components'], planes)
+    missed = component_planes_by_hand([HIDDEN], planes)
     grade = 6.3 * max(abs(u) / share for u, share in zip(found, shares))
     of_record = verdict_of_record(model, cells.estimate, OMEGA)
     level, message, values = cells.diagnose(of_record)
