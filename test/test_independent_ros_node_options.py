@@ -1,0 +1,365 @@
+"""
+The node ``BalanceMonitor`` with its options on, in this process: what each option adds.
+
+One node on its own rclpy context (as test_independent_ros_balance_monitor.py makes it:
+``publish`` kept, the monotonic clock the test's, nothing spins) with a layout_file, a
+recording (record_path, labelled a trial run, machine M8), the bearings' life (the layout's
+supports describe their bearings), load cells (each support's cell reads what Pinocchio
+gives for the TRUE rotor: the layout's balanced drum and a 0.5 kg mass it misses), a
+keyphasor topic and a rerun view (its logger a stand-in that keeps what it is handed).
+The recording is read back with the ``mcap`` library; the identified unbalance is the
+missed mass's by hand (m r omega^2), the bearings' life ISO 281's (P / C)^p per
+revolution under the constant loads of a balanced drum (each support half its weight);
+the log lines are the words people read.
+"""
+
+import io
+import json
+import math
+import os
+from unittest import mock
+
+from mcap.reader import make_reader
+import numpy as np
+import pytest
+import rclpy
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
+from rclpy.serialization import deserialize_message, serialize_message
+import yaml
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from cvc_balance.ros import balance_monitor
+from cvc_balance.ros.balance_monitor import BalanceMonitor
+from cvc_balance.view import rerun_log
+from independent import PinocchioRotor
+
+G = 9.80665
+DRUM = {'name': 'balanced drum', 'gravity': [0.0, -G, 0.0],
+        'components': [{'name': 'drum', 'mass': 400.0, 'radius': 0.0, 'angle_deg': 0.0,
+                        'shape': {'type': 'tube', 'inner_radius': 0.7, 'outer_radius': 0.8,
+                                  'length': 0.3}}],
+        'supports': [{'name': 'front', 'z': -0.5,
+                      'bearing': {'C': 20000.0, 'type': 'ball', 'limit_speed': 15.0}},
+                     {'name': 'rear', 'z': 0.5, 'axial': True,
+                      'bearing': {'C': 40000.0, 'type': 'roller', 'a1': 0.5}}],
+        'balancing': {'grade': 6.3}}
+MISSED = {'name': 'missed', 'mass': 0.5, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.1}
+OMEGA, RATE = 20.0, 500.0
+LINE_NS = 900 * 10**9           # the stamps' line: 900 s behind the receive clock
+
+
+class Clock:
+    """The node's monotonic clock, set by the test (whole nanoseconds)."""
+
+    def __init__(self):
+        self.ns = 1000 * 10**9
+
+    def __call__(self):
+        return self.ns / 1e9
+
+
+class Logger:
+    """The node's logger in the test: (severity, text) of each line."""
+
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text):
+        self.lines.append(('info', text))
+
+    def warning(self, text):
+        self.lines.append(('warning', text))
+
+    def error(self, text):
+        self.lines.append(('error', text))
+
+
+class Rerun:
+    """rerun_log's open_recording and RunLogger: what the node hands them, kept."""
+
+    def __init__(self):
+        self.calls = []
+
+    def open_recording(self, mode, target='', name='cvc_balance'):
+        self.calls.append(('open_recording', mode, target, name))
+        return 'the recording'
+
+    def RunLogger(self, recording, every=1):      # noqa: N802 (the class it stands for)
+        self.calls.append(('RunLogger', recording, every))
+        return self
+
+    def layout(self, time_ns, model):
+        self.calls.append(('layout', time_ns, model))
+
+    def sample(self, stamp_ns, angle, omega, alpha, result):
+        self.calls.append(('sample', stamp_ns, angle, omega, alpha, result))
+
+    def evidence(self, time_ns, of_record):
+        self.calls.append(('evidence', time_ns, of_record))
+
+    def finish(self):
+        self.calls.append(('finish',))
+
+
+@pytest.fixture(scope='module')
+def node(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('options')
+    layout_file = folder / 'drum.yaml'
+    layout_file.write_text(yaml.safe_dump(DRUM))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=150 + (os.getpid() + 40) % 80)
+    published, clock, logger, rerun = [], Clock(), Logger(), Rerun()
+    with mock.patch.object(Publisher, 'publish',
+                           lambda self, msg: published.append((self.topic_name, msg))), \
+            mock.patch.object(balance_monitor, 'monotonic', clock), \
+            mock.patch.object(BalanceMonitor, 'get_logger', lambda self: logger), \
+            mock.patch.object(rerun_log, 'open_recording', rerun.open_recording), \
+            mock.patch.object(rerun_log, 'RunLogger', rerun.RunLogger):
+        monitor = BalanceMonitor(context=context, parameter_overrides=[
+            Parameter('joint_name', value='spin'), Parameter('machine_id', value='M8'),
+            Parameter('layout_file', value=str(layout_file)),
+            Parameter('record_path', value=str(folder / 'run.mcap')),
+            Parameter('record_run', value='trial'),
+            Parameter('record_trial', value='I:0.2@0,0.68'),
+            Parameter('identify_window_revs', value=2),
+            Parameter('keyphasor_topic', value='tach'),
+            Parameter('keyphasor_edge', value='falling'),
+            Parameter('keyphasor_threshold', value=0.5),
+            Parameter('rerun', value='save'), Parameter('rerun_target', value='run.rrd'),
+            Parameter('rerun_every', value=3)])
+        monitor.published, monitor.clock, monitor.logger, monitor.rerun = \
+            published, clock, logger, rerun
+        monitor.folder, monitor.layout_file = folder, layout_file
+        monitor.destroyed = False
+        yield monitor
+        if not monitor.destroyed:
+            try:
+                monitor.destroy_node()
+            except Exception:       # a mutant's broken state (mutants_in_process): go on
+                Node.destroy_node(monitor)
+    rclpy.try_shutdown(context=context)
+
+
+def wrench(sec, nanosec, force, torque=(0.0, 0.0, 0.0)):
+    message = WrenchStamped()
+    message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
+    message.header.frame_id = 'cell'
+    (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z) = map(float, force)
+    (message.wrench.torque.x, message.wrench.torque.y,
+     message.wrench.torque.z) = map(float, torque)
+    return serialize_message(message)
+
+
+def joint_states(stamp_ns, angle, omega):
+    msg = JointState(name=['spin'], position=[angle], velocity=[omega])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    return serialize_message(msg)
+
+
+def diagnostics(node):
+    """Publish the diagnostics now; return the statuses by name's tail, values as dicts."""
+    node.published.clear()
+    node._publish_diagnostics()
+    (array,) = [msg for topic, msg in node.published if topic == '/diagnostics']
+    node.published.clear()
+    assert isinstance(array, DiagnosticArray)
+    return {s.name.split(': ', 1)[1]: (s, {kv.key: kv.value for kv in s.values})
+            for s in array.status}
+
+
+def test_the_layout_file_is_in_force_from_the_start_and_said(node):
+    """Put the layout_file in force at start, say it, hand it to rerun; open the view."""
+    active = node._active
+    assert active.layout.name == 'balanced drum' and active.source == str(node.layout_file)
+    assert node.logger.lines[0] == (
+        'info', f"layout 'balanced drum' ({active.digest}) from {node.layout_file}: "
+        '1 components, 400.000 kg')
+    assert node.rerun.calls == [('open_recording', 'save', 'run.rrd', '/balance_monitor'),
+                                ('RunLogger', 'the recording', 3),
+                                ('layout', None, active.model)]
+    assert active.model.mass == 400.0
+    assert node._layout_error == ''
+    assert node._recorder.counts['/layout'] == 1
+
+
+def test_the_tach_is_awaited_on_its_topic_with_its_edge_and_threshold(node):
+    """Say the keyphasor's topic awaited in the values and where samples are awaited."""
+    keyphasor = node._keyphasor
+    assert (keyphasor.topic, keyphasor.threshold, keyphasor.qos.depth) == ('/tach', 0.5, 1000)
+    assert (keyphasor.signal.sign, keyphasor.signal.given) == (-1.0, 0.5)      # falling
+    _, values = diagnostics(node)['rotor balance']
+    assert values['keyphasor'] == '/tach (waiting for a publisher)'
+    assert node._motion_topics() == (
+        '/joint_states, /speed or the keyphasor /tach, where nothing publishes')
+
+
+@pytest.fixture(scope='module')
+def turned(node):
+    """
+    Turn at OMEGA for 2.2 revolutions, 500 samples a second; each cell reads each sample.
+
+    The cells read the true rotor's support forces (the drum and MISSED) by Pinocchio.
+    Returns the samples' stamps (ns) and what was published, by topic.
+    """
+    true = PinocchioRotor(dict(DRUM, components=DRUM['components'] + [MISSED]))
+    cells = {s.topic_name: s.callback for s in node.subscriptions
+             if s.topic_name.endswith('/measured_load')}
+    assert sorted(cells) == ['/supports/front/measured_load', '/supports/rear/measured_load']
+    node.published.clear()
+    node.logger.lines.clear()
+    del node.rerun.calls[:]
+    steps = int(2.2 * 2 * math.pi / OMEGA * RATE)
+    stamps = []
+    for j in range(steps + 1):
+        node.clock.ns += 2_000_000
+        stamp = node.clock.ns - LINE_NS
+        stamps.append(stamp)
+        angle = OMEGA * j / RATE
+        node._on_joint_states(joint_states(stamp, math.remainder(angle, 2 * math.pi), OMEGA))
+        for name, (force, _) in true.loads(angle, OMEGA, 0.0)['supports'].items():
+            cells[f'/supports/{name}/measured_load'](wrench(*divmod(stamp, 10**9), force))
+    out = {}
+    for topic, msg in node.published:
+        out.setdefault(topic, []).append(msg)
+    return stamps, out
+
+
+def test_the_cells_identify_the_missed_mass_at_each_revolution_in_the_rotor_frame(
+        node, turned):
+    """Publish the missed mass's m r omega^2 and couple m r z omega^2 at revolutions 1, 2."""
+    stamps, out = turned
+    assert node._counts['accepted'] == len(stamps)
+    assert node._active.cells.readings == {'front': len(stamps), 'rear': len(stamps)}
+    force = MISSED['mass'] * MISSED['radius'] * OMEGA ** 2          # 36 N
+    couple = force * MISSED['z']
+    angle = math.radians(MISSED['angle_deg'])
+    want = ([force * math.cos(angle), force * math.sin(angle), 0.0],
+            [-couple * math.sin(angle), couple * math.cos(angle), 0.0])
+    for topic in ('/identified_unbalance', '/unbalance_residual'):   # the layout's is 0
+        assert len(out[topic]) == 2, topic
+        for revolution, data in zip((1, 2), out[topic]):
+            msg = deserialize_message(data, WrenchStamped)
+            # The sample that completed the revolution: the first past 2 pi k rad.
+            j = math.ceil(revolution * 2 * math.pi / OMEGA * RATE)
+            assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == divmod(stamps[j], 10**9)
+            assert msg.header.frame_id == 'rotor'
+            got = msg.wrench.force, msg.wrench.torque
+            np.testing.assert_allclose([[v.x, v.y, v.z] for v in got], want, atol=1e-6)
+    assert node._recorder.counts['/identified_unbalance'] == 2
+    assert node._recorder.counts['/unbalance_residual'] == 2
+
+
+def test_each_sample_is_handed_to_rerun_and_recorded_as_published(node, turned):
+    """Hand rerun each sample's stamp, angle, speed, zero slope; record every output."""
+    stamps, out = turned
+    samples = [call for call in node.rerun.calls if call[0] == 'sample']
+    assert len(samples) == len(stamps)
+    for j, (_, stamp_ns, angle, omega, alpha, result) in enumerate(samples):
+        assert stamp_ns == stamps[j]
+        assert angle == math.remainder(OMEGA * j / RATE, 2 * math.pi) and omega == OMEGA
+        assert abs(alpha) < 1e-9
+    weight = 400.0 * G
+    np.testing.assert_allclose(samples[-1][5].force_stator, [0.0, -weight, 0.0], atol=1e-9)
+    for topic in ('/bearing_load', '/supports/front/load', '/supports/rear/load',
+                  '/unbalance', '/drive_torque'):
+        assert len(out[topic]) == len(stamps), topic
+        assert node._recorder.counts[topic] == len(stamps), topic
+    front = deserialize_message(out['/supports/front/load'][-1], WrenchStamped)
+    assert [front.wrench.force.x, front.wrench.force.y] == pytest.approx(
+        [0.0, -weight / 2], abs=1e-9)
+
+
+def test_the_bearings_life_is_iso_281s_under_half_the_weight_each(node, turned):
+    """
+    Count (P / C)^p a revolution, P half the drum's weight; WARN over front's limit speed.
+
+    Front: a ball bearing (p 3) of C 20 kN, limit 15 rad/s; rear: a roller bearing
+    (p 10/3) of C 40 kN, a1 0.5. The state file beside the recording, read back.
+    """
+    stamps, _ = turned
+    statuses = diagnostics(node)
+    status, values = statuses['bearing life']
+    assert status.name == '/balance_monitor: bearing life' and status.hardware_id == 'M8'
+    seconds = (len(stamps) - 1) / RATE
+    revolutions = OMEGA * seconds / (2 * math.pi)
+    load = 400.0 * G / 2
+    used = {'front': revolutions * (load / 20000.0) ** 3 / 1e6,
+            'rear': revolutions * (load / 40000.0) ** (10 / 3) / 1e6 / 0.5}
+    hours = seconds / 3600
+    parts = [f'{name} {used[name]:.3g} used since start ({used[name] / hours:.3g}/h: rating '
+             f'life {hours / used[name]:.4g} h at this duty), {used[name]:.3g} in all'
+             for name in ('front', 'rear')]
+    assert status.level == DiagnosticStatus.WARN
+    assert status.message == ('bearing life: front: speed 20 rad/s over its limiting speed '
+                              '15 rad/s; ' + '; '.join(parts))
+    path = node.folder / 'bearing_life_M8.json'
+    assert values['state file'] == str(path)
+    for name in ('front', 'rear'):
+        assert float(values[f'{name} life used since start']) == pytest.approx(
+            used[name], rel=1e-5)
+        assert float(values[f'{name} revolutions since start']) == pytest.approx(
+            revolutions, rel=1e-5)
+        assert float(values[f'{name} mean equivalent load since start [N]']) == \
+            pytest.approx(load, rel=1e-5)
+    saved = json.loads(path.read_text())
+    assert saved['kind'] == 'cvc_balance bearing life'
+    for name in ('front', 'rear'):
+        assert saved['supports'][name]['revolutions'] == pytest.approx(revolutions, rel=1e-9)
+        assert saved['supports'][name]['life_used'] == pytest.approx(used[name], rel=1e-9)
+
+
+
+def test_the_cells_verdict_is_of_record_said_once_and_handed_to_rerun(node, turned):
+    """
+    Judge the measured rotor: plane shares of 0.3 kg m at z 0.1 by the lever rule.
+
+    Planes I and II at the supports (z -0.5, 0.5): 0.12 and 0.18 kg m; each plane may
+    have half of G 6.3's U = G m / omega = 6.3e-3 * 400 / 20 kg m (levers 0.5 about the
+    centre of mass); the grade achieved 6.3 * 0.18 / 0.063.
+    """
+    stamps, _ = turned
+    node.logger.lines.clear()
+    node._reported_measured = node._reported_level = None
+    del node.rerun.calls[:]
+    allowed = 6.3e-3 * 400.0 / OMEGA / 2 * 1e6                     # g mm a plane
+    planes = [MISSED['mass'] * MISSED['radius'] * share * 1e6 for share in (0.4, 0.6)]
+    grade = 6.3 * planes[1] / allowed
+    assert f'{grade:.3g}' == '18'
+    verdict = f'G {grade:.3g} at the top speed seen 20 rad/s: OUT OF G 6.3'
+    said = [f'plane {label} +{amount:.0f} g mm at 30.0 deg' for label, amount in
+            zip(('I', 'II'), planes)]
+    detail = [f'{s} (95 % radius 0 g mm; {amount / allowed:.2f} of its permissible '
+              f'{allowed:.0f} g mm)' for s, amount in zip(said, planes)]
+    explain = (f"as if an unlisted {0.3 / 0.8 * 1e3:.0f} g at the correction radius 0.8 m "
+               'were at 30 deg, z 0.100 m (or a part there heavier than the layout says)')
+    statuses = diagnostics(node)
+    status, values = statuses['measured unbalance']
+    measured = (f'measured: {verdict}; the rotor is not what its layout says: '
+                f'{", ".join(detail)}; {explain}')
+    assert (status.name, status.hardware_id) == ('/balance_monitor: measured unbalance', 'M8')
+    assert (status.level, status.message) == (DiagnosticStatus.ERROR, measured)
+    assert values['cell front readings'] == values['cell rear readings'] == str(len(stamps))
+    assert values['measured verdict'] == verdict
+    assert float(values['measured static [g mm]']) == pytest.approx(3e5, rel=1e-6)
+    assert float(values['measured static angle [deg]']) == pytest.approx(30.0)
+    for label, amount in zip(('I', 'II'), planes):
+        assert float(values[f'residual plane {label} [g mm]']) == pytest.approx(amount,
+                                                                                 rel=1e-6)
+    status, values = statuses['rotor balance']
+    headline = (f'{verdict} (measured by the load cells); the rotor is not what its layout '
+                f'says: {", ".join(said)}; the layout expects OK: G 0 at the top speed seen '
+                '20 rad/s: WITHIN G 6.3')
+    assert (status.level, status.message) == (DiagnosticStatus.ERROR, headline)
+    assert node.logger.lines == [('error', f'load cells ERROR: {measured}'),
+                                 ('error', f'balance ERROR: {headline}')]
+    ((what, time_ns, of_record),) = node.rerun.calls
+    assert (what, time_ns, of_record.source, of_record.level) == (
+        'evidence', stamps[-1], 'measured', 'ERROR')
+    diagnostics(node)
+    assert len(node.logger.lines) == 2          # said once
