@@ -13,7 +13,6 @@ revolution under the constant loads of a balanced drum (each support half its we
 the log lines are the words people read.
 """
 
-import io
 import json
 import math
 import os
@@ -314,7 +313,6 @@ def test_the_bearings_life_is_iso_281s_under_half_the_weight_each(node, turned):
         assert saved['supports'][name]['life_used'] == pytest.approx(used[name], rel=1e-9)
 
 
-
 def test_the_cells_verdict_is_of_record_said_once_and_handed_to_rerun(node, turned):
     """
     Judge the measured rotor: plane shares of 0.3 kg m at z 0.1 by the lever rule.
@@ -349,8 +347,8 @@ def test_the_cells_verdict_is_of_record_said_once_and_handed_to_rerun(node, turn
     assert float(values['measured static [g mm]']) == pytest.approx(3e5, rel=1e-6)
     assert float(values['measured static angle [deg]']) == pytest.approx(30.0)
     for label, amount in zip(('I', 'II'), planes):
-        assert float(values[f'residual plane {label} [g mm]']) == pytest.approx(amount,
-                                                                                 rel=1e-6)
+        residual = float(values[f'residual plane {label} [g mm]'])
+        assert residual == pytest.approx(amount, rel=1e-6)
     status, values = statuses['rotor balance']
     headline = (f'{verdict} (measured by the load cells); the rotor is not what its layout '
                 f'says: {", ".join(said)}; the layout expects OK: G 0 at the top speed seen '
@@ -363,3 +361,156 @@ def test_the_cells_verdict_is_of_record_said_once_and_handed_to_rerun(node, turn
         'evidence', stamps[-1], 'measured', 'ERROR')
     diagnostics(node)
     assert len(node.logger.lines) == 2          # said once
+
+
+def test_a_layout_file_refused_is_said_and_the_one_in_force_kept(node, turned):
+    """Say a missing or bad file in the words people read; keep the layout in force."""
+    stamps, _ = turned
+    node.logger.lines.clear()
+    missing = node.folder / 'none.yaml'
+    node._apply_layout_file(missing)
+    said = f'{missing}: cannot read layout file: No such file or directory'
+    bad = node.folder / 'bad.yaml'
+    bad.write_text(yaml.safe_dump(dict(DRUM, supports=[])))
+    node._apply_layout_file(bad)
+    wrong = f'{bad}: layout: field supports: needs 1 or 2 supports, got 0'
+    assert node.logger.lines == [
+        ('error', f"layout rejected ('balanced drum' stays in force): {said}"),
+        ('error', f"layout rejected ('balanced drum' stays in force): {wrong}")]
+    assert node._layout_error == wrong and node._active.layout.name == 'balanced drum'
+    assert node._recorder.counts['/layout'] == 1
+    status, values = diagnostics(node)['rotor balance']
+    assert values['last rejected layout'] == wrong
+    assert status.message.endswith(f'; last layout rejected: {wrong}')
+    with mock.patch.object(node, '_active', None):
+        node._refuse_layout('why')
+    assert node.logger.lines[-1] == ('error', 'layout rejected (no layout in force): why')
+
+
+def test_a_new_layout_file_after_samples_is_recorded_and_handed_to_rerun_then(node, turned):
+    """Record the layout put in force; hand rerun the new model at the last sample's time."""
+    stamps, _ = turned
+    again = node.folder / 'again.yaml'
+    again.write_text(yaml.safe_dump(dict(DRUM, name='drum again')))
+    old = node._active
+    del node.rerun.calls[:]
+    node.logger.lines.clear()
+    node.published.clear()
+    node._apply_layout_file(again)
+    active = node._active
+    assert active is not old and active.layout.name == 'drum again'
+    assert node._layout_error == '' and node._top_speed == 0.0
+    assert node._recorder.counts['/layout'] == 2
+    assert node.rerun.calls[0] == ('layout', stamps[-1], active.model)
+    assert [call[0] for call in node.rerun.calls] == ['layout', 'evidence']
+    assert node.logger.lines[0] == (
+        'info', f"layout 'drum again' ({active.digest}) from {again}: 1 components, "
+        '400.000 kg')
+    assert [topic for topic, _ in node.published] == ['/diagnostics']   # the verdict at once
+    assert node._life_counting is node._life.counting is not None
+    assert set(node._life_counting.counters) == {'front', 'rear'}
+
+
+def test_layouts_that_come_meanwhile_are_said_waiting_or_dropped(node):
+    """Say each layout received, whether it waits, and the one dropped unparsed."""
+    node.logger.lines.clear()
+    texts = [json.dumps(dict(DRUM, name=name)) for name in ('one', 'two', 'three')]
+    for text in texts:
+        node._on_layout(String(data=text))
+    assert node.logger.lines == [
+        ('info', f'layout received on the layout topic ({len(texts[0])} characters): parsing'),
+        ('info', f'layout received on the layout topic ({len(texts[1])} characters): waits '
+                 'for the one being parsed'),
+        ('info', f'layout received on the layout topic ({len(texts[2])} characters): waits '
+                 'for the one being parsed'),
+        ('warning', f'layout dropped unparsed ({len(texts[1])} characters from the layout '
+                    'topic): a newer one came while another was being parsed; the newest '
+                    'wins')]
+    for _ in range(2):
+        node._preparing.result()
+        node._take_prepared()
+    assert node._active.layout.name == 'three' and node._layouts_dropped == 1
+
+
+def test_samples_without_a_layout_and_on_a_new_time_line_are_said(node):
+    """Say dropped samples once a second; say a new time line confirmed by two samples."""
+    node.logger.lines.clear()
+    with mock.patch.object(node, '_active', None):
+        for _ in range(2):
+            node.clock.ns += 2_000_000
+            node._on_joint_states(joint_states(node.clock.ns - LINE_NS, 0.0, OMEGA))
+    assert node.logger.lines == [('warning', 'no layout yet: motion samples dropped')]
+    node.logger.lines.clear()
+    node.clock.ns += 10**9                       # a second without samples, then 50 s later
+    for _ in range(2):
+        node.clock.ns += 2_000_000
+        stamp = node.clock.ns - LINE_NS + 50 * 10**9
+        node._on_joint_states(joint_states(stamp, 0.0, OMEGA))
+    assert node._last_time == pytest.approx(stamp / 1e9, abs=1e-9)
+    sec, nanosec = divmod(stamp, 10**9)
+    assert node.logger.lines[-1] == (
+        'warning', f'motion samples moved to a new time line at {sec}.{nanosec:09d} s '
+        '(confirmed by two samples)')
+
+
+def test_a_message_rclpy_could_not_hand_over_is_counted_and_said(node):
+    """Count it as an internal error; say it cut to 200 characters, once a second."""
+    node.logger.lines.clear()
+    errors = node._internal_errors
+    node.clock.ns += 2 * 10**9
+    node.lost_message(ValueError('bad\n' + 'x' * 300))
+    node.lost_message(ValueError('again'))
+    said = 'a message rclpy could not convert: bad ' + 'x' * 196 + '... (304 characters)'
+    assert node._internal_errors == errors + 2
+    assert node.logger.lines == [('error', said)]
+    assert node._last_rejection == 'a message rclpy could not convert: again'
+
+
+def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_view(
+        node, turned, capsys):
+    """
+    Print the counts; close the bag (read back by the mcap library); save; finish rerun.
+
+    The bag: labelled and named for its machine, the layouts put in force from files as
+    the files say them, each output as published.
+    """
+    stamps, out = turned
+    cells = {s.topic_name: s.callback for s in node.subscriptions
+             if s.topic_name.endswith('/measured_load')}
+    for k in range(3):
+        node.clock.ns += 2_000_000
+        stamp = node.clock.ns - LINE_NS + 50 * 10**9      # the line the last test moved to
+        node._on_joint_states(joint_states(stamp, 0.04 * k, OMEGA))
+        cells['/supports/rear/measured_load'](wrench(*divmod(stamp, 10**9), (0.0, -2e3, 0.0)))
+    cells['/supports/front/measured_load'](b'\x00\x01\x00\x00' + bytes(8))
+    counts = dict(node._counts)
+    capsys.readouterr()
+    node.destroyed = True
+    node.destroy_node()
+    printed = capsys.readouterr().out.splitlines()
+    assert printed == [
+        'balance_monitor: motion samples: ' + ', '.join(
+            f'{counts[name]} {name}' for name in ('accepted', 'rejected', 'dropped')),
+        'balance_monitor: keyphasor /tach: 0 marks, 0 missed (put back), 0 doubled '
+        '(dropped), 0 irregular periods (no angle there), 0 revolutions',
+        'balance_monitor: load cell readings (layout in force): 0 front, 3 rear, 1 dropped']
+    assert node.rerun.calls[-1] == ('finish',) and node._rerun is None
+    assert node._recorder is None and node._layout_worker._shutdown
+    with open(node.folder / 'run.mcap', 'rb') as stream:
+        reader = make_reader(stream)
+        metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        messages = {}
+        for _, channel, message in reader.iter_messages():
+            messages.setdefault(channel.topic, []).append(message.data)
+    assert metadata['cvc_balance'] == {'machine_id': 'M8', 'run': 'trial',
+                                       'trial': 'I:0.2@0.0,0.68'}
+    layouts = [deserialize_message(data, String).data for data in messages['/layout']]
+    assert layouts == [node.layout_file.read_text(),
+                       (node.folder / 'again.yaml').read_text()]
+    for topic in ('/bearing_load', '/supports/front/load', '/supports/rear/load',
+                  '/unbalance', '/drive_torque', '/identified_unbalance',
+                  '/unbalance_residual'):
+        assert messages[topic][:len(out[topic])] == [bytes(d) for d in out[topic]], topic
+    assert len(messages['/bearing_load']) == counts['accepted'] == len(stamps) + 4
+    assert json.loads((node.folder / 'bearing_life_M8.json').read_text())['supports'][
+        'front']['revolutions'] > 2.0
