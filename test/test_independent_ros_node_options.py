@@ -26,6 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message, serialize_message
+from rcl_interfaces.msg import ParameterType
 import yaml
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -196,6 +197,57 @@ def test_the_tach_is_awaited_on_its_topic_with_its_edge_and_threshold(node):
     assert values['keyphasor'] == '/tach (waiting for a publisher)'
     assert node._motion_topics() == (
         '/joint_states, /speed or the keyphasor /tach, where nothing publishes')
+
+
+
+def test_before_any_sample_nothing_is_judged_and_stale_comes_after_stale_after(node):
+    """Leave the achieved grade and the last sample empty; STALE only past stale_after."""
+    status, values = diagnostics(node)['rotor balance']
+    assert (values['last motion sample [s ago]'], values['achieved grade [mm/s]']) == ('', '')
+    assert status.level == DiagnosticStatus.OK
+    started = node._started
+    node.clock.ns += 2 * 10**9                  # stale_after (2 s) exactly: not yet
+    assert node.clock() - started == 2.0
+    status, _ = diagnostics(node)['rotor balance']
+    assert status.level == DiagnosticStatus.OK
+    node.clock.ns += 1
+    status, _ = diagnostics(node)['rotor balance']
+    assert status.level == DiagnosticStatus.STALE
+    assert status.message.startswith(
+        'no motion sample yet on /joint_states, /speed or the keyphasor /tach, where nothing '
+        'publishes (stale after 2 s); balance grade not judged: ')
+
+
+def test_the_parameters_are_declared_read_only_with_their_ranges_and_words(node):
+    """Describe each parameter as --help does: read only, typed, its range."""
+    (depth, speed, target, edge) = node.describe_parameters(
+        ['input_depth', 'max_speed', 'rerun_target', 'keyphasor_edge'])
+    assert all(d.read_only for d in (depth, speed, target, edge))
+    assert depth.type == ParameterType.PARAMETER_INTEGER
+    assert [(r.from_value, r.to_value, r.step) for r in depth.integer_range] == [(1, 10000, 1)]
+    assert depth.description == ('history depth of the best-effort joint_states, speed and '
+                                 'load cell subscriptions')
+    assert speed.type == ParameterType.PARAMETER_DOUBLE
+    assert [(r.from_value, r.to_value) for r in speed.floating_point_range] == [(1e-3, 1e5)]
+    assert target.description == '.rrd path (save) or viewer URL (connect)'
+    assert edge.type == ParameterType.PARAMETER_STRING and not edge.floating_point_range
+
+
+@pytest.mark.parametrize('name, value, said', [
+    ('keyphasor_edge', 'sideways',
+     "parameter keyphasor_edge must be rising or falling, got 'sideways'"),
+    ('joint_name', ' ', "parameter joint_name must be a non-empty string, got ' '"),
+    ('stator_frame', '', "parameter stator_frame must be a non-empty string, got ''"),
+    ('rotor_frame', '\t', "parameter rotor_frame must be a non-empty string, got '\\t'"),
+    ('balance_grade', 0.05, 'parameter balance_grade must be from 0.1 to 4000 mm/s (ISO '
+     '21940-11 grades run from G 0.4 to G 4000), got 0.05 mm/s')])
+def test_a_parameter_that_cannot_be_is_refused_in_words(node, name, value, said):
+    """Refuse the node: a tach edge, an empty name or frame, a grade out of ISO's range."""
+    with pytest.raises(ValueError) as refused:
+        BalanceMonitor(context=node.context, parameter_overrides=[Parameter(name, value=value)])
+    assert str(refused.value) == said
+    BalanceMonitor(context=node.context,
+                   parameter_overrides=[Parameter('balance_grade', value=4000.0)]).destroy_node()
 
 
 @pytest.fixture(scope='module')
@@ -464,6 +516,70 @@ def test_a_message_rclpy_could_not_hand_over_is_counted_and_said(node):
     assert node._internal_errors == errors + 2
     assert node.logger.lines == [('error', said)]
     assert node._last_rejection == 'a message rclpy could not convert: again'
+
+
+def test_a_failure_in_a_callback_is_counted_said_as_an_error_and_cut(node):
+    """Count each failure; say it at error level, its text cut to 200 characters."""
+    def boom():
+        raise ValueError('y' * 300)
+    node.logger.lines.clear()
+    node.clock.ns += 2 * 10**9
+    errors = node._internal_errors
+    node._guarded(boom)()
+    assert node._internal_errors == errors + 1 > 1
+    said = 'internal error in boom: ValueError: ' + 'y' * 200 + '... (300 characters)'
+    assert node._last_rejection == said
+    assert node.logger.lines == [('error', said)]
+
+
+def test_a_rejection_is_cut_to_150_characters_in_the_headline_and_said_in_full(node):
+    """Keep a reason of 150 characters; cut a longer one; log each once a second, in full."""
+    node.logger.lines.clear()
+    node.clock.ns += 2 * 10**9
+    node._reject('z' * 150)
+    assert node._last_rejection == 'z' * 150
+    node.clock.ns += 10**9                      # THROTTLE_S exactly: said again
+    node._reject('z' * 151)
+    assert node._last_rejection == 'z' * 150 + '... (151 characters)'
+    assert node.logger.lines == [('warning', 'rejected ' + 'z' * 150),
+                                 ('warning', 'rejected ' + 'z' * 151)]
+
+
+def test_a_joint_state_without_the_joint_names_what_it_has_cut_or_none(node):
+    """Name the joints it has, cut to 60 characters, or 'no joint'."""
+    names = ['a' * 40, 'b' * 40]
+    for given, shown in ((names, "'" + 'a' * 40 + "', '" + 'b' * 15 + '... (86 characters)'),
+                         ([], 'no joint')):
+        msg = JointState(name=given, position=[0.0] * len(given),
+                         velocity=[0.0] * len(given))
+        node._on_joint_states(serialize_message(msg))
+        assert node._last_rejection == (f"/joint_states without joint 'spin' (it names "
+                                        f'{shown}): set joint_name')
+
+
+def test_a_layout_waits_for_the_poll_timer_when_no_sample_comes(node):
+    """Poll every 10 ms; the timer's callback puts the layout in force, then goes."""
+    node._take_prepared()                        # nothing prepared: nothing happens
+    assert node._layout_poll is None
+    node._on_layout(String(data=json.dumps(dict(DRUM, name='polled'))))
+    poll = node._layout_poll
+    assert poll.timer_period_ns == 10_000_000
+    node._preparing.result()
+    poll.callback()
+    assert node._active.layout.name == 'polled'
+    assert node._layout_poll is None and poll not in node.timers
+
+
+def test_a_plane_without_a_correction_radius_says_so(node):
+    """Say 'none (no correction radius)' for a rotor of point masses on its axis."""
+    layout = dict(DRUM, name='points', balancing={'grade': 6.3, 'service_speed': 10.0})
+    layout['components'] = [{'name': 'hub', 'mass': 10.0, 'radius': 0.0, 'angle_deg': 0.0}]
+    node._on_layout(String(data=json.dumps(layout)))
+    node._preparing.result()
+    node._take_prepared()
+    _, values = diagnostics(node)['rotor balance']
+    assert values['plane I correction mass [g]'] == values['plane II correction mass [g]'] == \
+        'none (no correction radius)'
 
 
 def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_view(
