@@ -16,6 +16,7 @@ the log lines are the words people read.
 import json
 import math
 import os
+import time
 from unittest import mock
 
 from mcap.reader import make_reader
@@ -32,7 +33,7 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Float64, String
 
 from cvc_balance.ros import balance_monitor
 from cvc_balance.ros.balance_monitor import BalanceMonitor
@@ -169,6 +170,7 @@ def diagnostics(node):
     (array,) = [msg for topic, msg in node.published if topic == '/diagnostics']
     node.published.clear()
     assert isinstance(array, DiagnosticArray)
+    assert array.header.stamp.sec > 1_600_000_000      # the ROS clock's now: system time
     return {s.name.split(': ', 1)[1]: (s, {kv.key: kv.value for kv in s.values})
             for s in array.status}
 
@@ -197,7 +199,6 @@ def test_the_tach_is_awaited_on_its_topic_with_its_edge_and_threshold(node):
     assert values['keyphasor'] == '/tach (waiting for a publisher)'
     assert node._motion_topics() == (
         '/joint_states, /speed or the keyphasor /tach, where nothing publishes')
-
 
 
 def test_before_any_sample_nothing_is_judged_and_stale_comes_after_stale_after(node):
@@ -358,6 +359,16 @@ def test_the_bearings_life_is_iso_281s_under_half_the_weight_each(node, turned):
             revolutions, rel=1e-5)
         assert float(values[f'{name} mean equivalent load since start [N]']) == \
             pytest.approx(load, rel=1e-5)
+    status, values = statuses['input checks']
+    assert (status.name, status.hardware_id, status.level) == (
+        '/balance_monitor: input checks', 'M8', DiagnosticStatus.OK)
+    assert status.message == ('inputs agree: joint position and velocity (rad, rad/s) and '
+                              "the cells and their supports' shares")
+    assert float(values['joint position rate / velocity']) == 1.0
+    assert float(values['joint position wraps at']) == pytest.approx(2 * math.pi, rel=1e-5)
+    for name in ('front', 'rear'):
+        assert float(values[f'cell {name} share of the weight [N]']) == pytest.approx(
+            load, rel=1e-5)
     saved = json.loads(path.read_text())
     assert saved['kind'] == 'cvc_balance bearing life'
     for name in ('front', 'rear'):
@@ -582,6 +593,59 @@ def test_a_plane_without_a_correction_radius_says_so(node):
         'none (no correction radius)'
 
 
+def graph_shows(node, check):
+    """Wait (up to 2 s) until the ROS graph, seen from ``node``, passes ``check``."""
+    for _ in range(200):
+        if check():
+            return
+        time.sleep(0.01)
+    raise AssertionError('the graph did not change in 2 s')
+
+
+def test_where_samples_are_awaited_names_the_publishers_seen(node):
+    """Name where JointState is published instead (three, the first to remap to)."""
+    other = Node('elsewhere', context=node.context)
+    try:
+        for name in ('/d/joints', '/a/joints', '/c/joints', '/b/joints'):
+            other.create_publisher(JointState, name, 1)
+        graph_shows(node, lambda: len([n for n, types in node.get_topic_names_and_types()
+                                       if n.endswith('/joints')]) == 4)
+        assert node._motion_topics() == (
+            '/joint_states, /speed or the keyphasor /tach, where nothing publishes; '
+            'JointState is published on /a/joints, /b/joints, /c/joints: remap with '
+            '-r joint_states:=/a/joints')
+        tach = other.create_publisher(Float64, '/tach', 1)
+        graph_shows(node, lambda: node.count_publishers('/tach') == 1)
+        assert node._motion_topics() == '/joint_states, /speed or the keyphasor /tach'
+        other.destroy_publisher(tach)
+        other.create_publisher(Float64, '/speed', 1)
+        graph_shows(node, lambda: node.count_publishers('/tach') == 0 and
+                    node.count_publishers('/speed') == 1)
+        assert node._motion_topics() == '/joint_states, /speed or the keyphasor /tach'
+    finally:
+        other.destroy_node()
+
+
+def test_a_position_in_degrees_is_said_as_an_input_mistake(node):
+    """Say a joint position 57.3 times its velocity's rate once, as a warning."""
+    node.logger.lines.clear()
+    node._checks.restart()
+    for j in range(1, 401):             # 2.5 turns: it wraps at 360
+        node.clock.ns += 2_000_000
+        stamp = node.clock.ns - LINE_NS + 50 * 10**9      # the line moved to above
+        node._on_joint_states(joint_states(stamp, math.degrees(OMEGA * j / RATE) % 360.0,
+                                           OMEGA))
+    node._reported_level = node._reported_measured = None
+    status, values = diagnostics(node)['input checks']
+    assert status.level == DiagnosticStatus.WARN
+    assert float(values['joint position rate / velocity']) == pytest.approx(
+        180 / math.pi, rel=1e-6)
+    warned = [line for line in node.logger.lines if 'input mistake?' in line[1]]
+    assert warned == [('warning', f'input mistake? {status.message}')]
+    diagnostics(node)
+    assert len([line for line in node.logger.lines if 'input mistake?' in line[1]]) == 1
+
+
 def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_view(
         node, turned, capsys):
     """
@@ -627,6 +691,6 @@ def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_vie
                   '/unbalance', '/drive_torque', '/identified_unbalance',
                   '/unbalance_residual'):
         assert messages[topic][:len(out[topic])] == [bytes(d) for d in out[topic]], topic
-    assert len(messages['/bearing_load']) == counts['accepted'] == len(stamps) + 4
+    assert len(messages['/bearing_load']) == counts['accepted'] == len(stamps) + 404
     assert json.loads((node.folder / 'bearing_life_M8.json').read_text())['supports'][
         'front']['revolutions'] > 2.0
