@@ -13,9 +13,11 @@ revolution under the constant loads of a balanced drum (each support half its we
 the log lines are the words people read.
 """
 
+from functools import partial
 import json
 import math
 import os
+import struct
 import time
 from unittest import mock
 
@@ -241,7 +243,9 @@ def test_the_parameters_are_declared_read_only_with_their_ranges_and_words(node)
     ('stator_frame', '', "parameter stator_frame must be a non-empty string, got ''"),
     ('rotor_frame', '\t', "parameter rotor_frame must be a non-empty string, got '\\t'"),
     ('balance_grade', 0.05, 'parameter balance_grade must be from 0.1 to 4000 mm/s (ISO '
-     '21940-11 grades run from G 0.4 to G 4000), got 0.05 mm/s')])
+     '21940-11 grades run from G 0.4 to G 4000), got 0.05 mm/s'),
+    ('record_run', 'baseline', 'record_run and record_trial label a recording: set '
+     'record_path')])
 def test_a_parameter_that_cannot_be_is_refused_in_words(node, name, value, said):
     """Refuse the node: a tach edge, an empty name or frame, a grade out of ISO's range."""
     with pytest.raises(ValueError) as refused:
@@ -249,6 +253,12 @@ def test_a_parameter_that_cannot_be_is_refused_in_words(node, name, value, said)
     assert str(refused.value) == said
     BalanceMonitor(context=node.context,
                    parameter_overrides=[Parameter('balance_grade', value=4000.0)]).destroy_node()
+
+
+def cell_callbacks(node):
+    """Return the load cells' callbacks by topic (the recorder may subscribe there too)."""
+    return {s.topic_name: s.callback for s in node.subscriptions
+            if s.topic_name.endswith('/measured_load') and isinstance(s.callback, partial)}
 
 
 @pytest.fixture(scope='module')
@@ -260,8 +270,7 @@ def turned(node):
     Returns the samples' stamps (ns) and what was published, by topic.
     """
     true = PinocchioRotor(dict(DRUM, components=DRUM['components'] + [MISSED]))
-    cells = {s.topic_name: s.callback for s in node.subscriptions
-             if s.topic_name.endswith('/measured_load')}
+    cells = cell_callbacks(node)
     assert sorted(cells) == ['/supports/front/measured_load', '/supports/rear/measured_load']
     node.published.clear()
     node.logger.lines.clear()
@@ -477,7 +486,7 @@ def test_a_new_layout_file_after_samples_is_recorded_and_handed_to_rerun_then(no
 def test_layouts_that_come_meanwhile_are_said_waiting_or_dropped(node):
     """Say each layout received, whether it waits, and the one dropped unparsed."""
     node.logger.lines.clear()
-    texts = [json.dumps(dict(DRUM, name=name)) for name in ('one', 'two', 'three')]
+    texts = [json.dumps(dict(DRUM, name=name)) for name in ('one', 'two', 'three', 'four')]
     for text in texts:
         node._on_layout(String(data=text))
     assert node.logger.lines == [
@@ -488,20 +497,30 @@ def test_layouts_that_come_meanwhile_are_said_waiting_or_dropped(node):
                  'for the one being parsed'),
         ('warning', f'layout dropped unparsed ({len(texts[1])} characters from the layout '
                     'topic): a newer one came while another was being parsed; the newest '
+                    'wins'),
+        ('info', f'layout received on the layout topic ({len(texts[3])} characters): waits '
+                 'for the one being parsed'),
+        ('warning', f'layout dropped unparsed ({len(texts[2])} characters from the layout '
+                    'topic): a newer one came while another was being parsed; the newest '
                     'wins')]
     for _ in range(2):
         node._preparing.result()
         node._take_prepared()
-    assert node._active.layout.name == 'three' and node._layouts_dropped == 1
+    assert node._active.layout.name == 'four' and node._layouts_dropped == 2
 
 
 def test_samples_without_a_layout_and_on_a_new_time_line_are_said(node):
     """Say dropped samples once a second; say a new time line confirmed by two samples."""
     node.logger.lines.clear()
+    checked = len(node._checks._recent)
     with mock.patch.object(node, '_active', None):
         for _ in range(2):
             node.clock.ns += 2_000_000
             node._on_joint_states(joint_states(node.clock.ns - LINE_NS, 0.0, OMEGA))
+    node._on_joint_states(joint_states(node.clock.ns - LINE_NS + 10**12, 0.0, OMEGA))
+    assert node._last_rejection.startswith('motion sample: stamp ')
+    assert len(node._checks._recent) == checked     # neither checked as an input
+    node.logger.lines[1:] = []
     assert node.logger.lines == [('warning', 'no layout yet: motion samples dropped')]
     node.logger.lines.clear()
     node.clock.ns += 10**9                       # a second without samples, then 50 s later
@@ -566,6 +585,15 @@ def test_a_joint_state_without_the_joint_names_what_it_has_cut_or_none(node):
         node._on_joint_states(serialize_message(msg))
         assert node._last_rejection == (f"/joint_states without joint 'spin' (it names "
                                         f'{shown}): set joint_name')
+    try:                                            # what Python says, cut at 100
+        struct.unpack_from('<I', bytes(5), 12)
+    except struct.error as error:
+        said = str(error)
+    assert len(said) > 100
+    reason = f'joint_states message not readable as JointState: {said[:100]}... ' \
+        f'({len(said)} characters)'
+    node._on_joint_states(b'\x00\x01\x00\x00\x00')
+    assert node._last_rejection == reason[:150] + f'... ({len(reason)} characters)'
 
 
 def test_a_layout_waits_for_the_poll_timer_when_no_sample_comes(node):
@@ -618,10 +646,14 @@ def test_where_samples_are_awaited_names_the_publishers_seen(node):
         graph_shows(node, lambda: node.count_publishers('/tach') == 1)
         assert node._motion_topics() == '/joint_states, /speed or the keyphasor /tach'
         other.destroy_publisher(tach)
+        other.create_publisher(WrenchStamped, '/supports/front/measured_load', 1)
         other.create_publisher(Float64, '/speed', 1)
         graph_shows(node, lambda: node.count_publishers('/tach') == 0 and
                     node.count_publishers('/speed') == 1)
         assert node._motion_topics() == '/joint_states, /speed or the keyphasor /tach'
+        assert node._recorder.subscription('/supports/front/measured_load') is None
+        node._recorder.discover()                    # its timer's work: the cells recorded
+        assert node._recorder.subscription('/supports/front/measured_load') is not None
     finally:
         other.destroy_node()
 
@@ -646,6 +678,57 @@ def test_a_position_in_degrees_is_said_as_an_input_mistake(node):
     assert len([line for line in node.logger.lines if 'input mistake?' in line[1]]) == 1
 
 
+def test_a_node_that_does_not_record_counts_life_since_start_and_judges_at_its_grade(
+        node, tmp_path):
+    """
+    Judge at balance_grade; count the bearings' life since start only; a tach's threshold.
+
+    The diagnostics timer's callback publishes; a layout put in force later restarts the
+    wait for samples; one rclpy cannot subscribe for is refused; a byte not UTF-8 in a
+    comment is no matter; the implausible said.
+    """
+    layout = dict(DRUM, name='served', balancing={'grade': 6.3, 'service_speed': 10.0})
+    path = tmp_path / 'served.yaml'
+    path.write_text(yaml.safe_dump(layout))
+    other = BalanceMonitor(context=node.context, parameter_overrides=[
+        Parameter('layout_file', value=str(path)), Parameter('balance_grade', value=16.0),
+        Parameter('keyphasor_topic', value='tach'), Parameter('diagnostics_period', value=0.5)])
+    other.published = node.published
+    try:
+        assert other._keyphasor.threshold is None
+        statuses = diagnostics(other)
+        status, _ = statuses['rotor balance']
+        assert status.message == ('G 0 at the service speed 10 rad/s: WITHIN G 16 (from the '
+                                  'layout: no load cells)')
+        assert statuses['bearing life'][1]['state file'] == \
+            'none (the node does not record: counted since start)'
+        (timer,) = [t for t in other.timers if t.timer_period_ns == 500_000_000]
+        node.published.clear()
+        timer.callback()
+        assert [topic for topic, _ in node.published] == ['/diagnostics']
+        assert other._internal_errors == 0
+        node.clock.ns += 5 * 10**9                   # no sample yet: the wait starts again
+        odd = dict(layout, name='odd', components=[
+            dict(DRUM['components'][0]),
+            {'name': 'lump', 'mass': 1.0, 'radius': 0.5, 'angle': 10.0}])
+        path.write_bytes(b'# caf\xe9\n' + yaml.safe_dump(odd).encode())
+        node.logger.lines.clear()
+        other._apply_layout_file(path)
+        assert other._active.layout.name == 'odd'
+        assert node.logger.lines[1] == (
+            'warning', "layout 'odd': implausible? component 'lump': angle 10 rad (572.958 "
+            'deg) is more than a full turn: degrees in the radians field? (angle_deg takes '
+            'degrees)')
+        status, _ = diagnostics(other)['rotor balance']
+        assert status.level == DiagnosticStatus.WARN            # not STALE
+        with mock.patch.object(balance_monitor, 'LoadCells', side_effect=RuntimeError('no')):
+            other._apply_layout_file(path)
+        assert other._layout_error == f'{path}: RuntimeError: no'
+        assert other._active.layout.name == 'odd'
+    finally:
+        other.destroy_node()
+
+
 def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_view(
         node, turned, capsys):
     """
@@ -655,8 +738,7 @@ def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_vie
     the files say them, each output as published.
     """
     stamps, out = turned
-    cells = {s.topic_name: s.callback for s in node.subscriptions
-             if s.topic_name.endswith('/measured_load')}
+    cells = cell_callbacks(node)
     for k in range(3):
         node.clock.ns += 2_000_000
         stamp = node.clock.ns - LINE_NS + 50 * 10**9      # the line the last test moved to
