@@ -190,6 +190,10 @@ def test_the_layout_file_is_in_force_from_the_start_and_said(node):
     assert active.model.mass == 400.0
     assert node._layout_error == ''
     assert node._recorder.counts['/layout'] == 1
+    recorder = node._recorder          # the inputs and diagnostics from the graph, not outputs
+    assert all(recorder.subscription(name) is not None for name in (
+        '/joint_states', '/speed', '/layout', '/diagnostics'))
+    assert recorder.subscription('/bearing_load') is None
 
 
 def test_the_tach_is_awaited_on_its_topic_with_its_edge_and_threshold(node):
@@ -379,6 +383,15 @@ def test_the_bearings_life_is_iso_281s_under_half_the_weight_each(node, turned):
         assert float(values[f'cell {name} share of the weight [N]']) == pytest.approx(
             load, rel=1e-5)
     saved = json.loads(path.read_text())
+    blocker = path.with_name(f'.{path.name}.{os.getpid()}.tmp')
+    blocker.mkdir()                     # where it is written first: the save fails, said
+    node.logger.lines.clear()
+    try:
+        diagnostics(node)
+    finally:
+        blocker.rmdir()
+    assert node.logger.lines == [
+        ('error', f'bearing life: state file not written: Is a directory: {path}')]
     assert saved['kind'] == 'cvc_balance bearing life'
     for name in ('front', 'rear'):
         assert saved['supports'][name]['revolutions'] == pytest.approx(revolutions, rel=1e-9)
@@ -454,6 +467,12 @@ def test_a_layout_file_refused_is_said_and_the_one_in_force_kept(node, turned):
     status, values = diagnostics(node)['rotor balance']
     assert values['last rejected layout'] == wrong
     assert status.message.endswith(f'; last layout rejected: {wrong}')
+    far = node.folder / ('n' * 150 + '.yaml')
+    node._apply_layout_file(far)
+    said = f'{far}: cannot read layout file: No such file or directory'
+    status, _ = diagnostics(node)['rotor balance']
+    assert status.message.endswith(
+        f'; last layout rejected: {said[:150]}... ({len(said)} characters)')
     with mock.patch.object(node, '_active', None):
         node._refuse_layout('why')
     assert node.logger.lines[-1] == ('error', 'layout rejected (no layout in force): why')
