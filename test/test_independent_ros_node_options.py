@@ -448,6 +448,38 @@ def test_the_cells_verdict_is_of_record_said_once_and_handed_to_rerun(node, turn
     assert len(node.logger.lines) == 2          # said once
 
 
+def test_a_residual_over_residual_warn_within_the_grade_is_a_warn_said_as_a_warning(
+        node, turned, monkeypatch):
+    """
+    Judge at balance_grade G 40 with residual_warn 0.3: within it, but not as laid out.
+
+    Each plane may have half of U = 40e-3 * 400 / 20 kg m: 0.4 kg m; the residuals 0.12
+    and 0.18 kg m are 0.3 and 0.45 of it: plane II over 0.3.
+    """
+    monkeypatch.setitem(node.params, 'balance_grade', 40.0)
+    monkeypatch.setitem(node.params, 'residual_warn', 0.35)
+    node.logger.lines.clear()
+    node._reported_measured = node._reported_level = None
+    allowed = 40e-3 * 400.0 / OMEGA / 2 * 1e6                      # g mm a plane
+    residual = MISSED['mass'] * MISSED['radius'] * 0.6 * 1e6        # plane II's share
+    verdict = f'G {40.0 * residual / allowed:.3g} at the top speed seen 20 rad/s: WITHIN G 40'
+    plane = f'plane II +{residual:.0f} g mm at 30.0 deg'
+    measured = (f'measured: {verdict}; the rotor is not what its layout says: {plane} (95 % '
+                f'radius 0 g mm; {residual / allowed:.2f} of its permissible {allowed:.0f} g '
+                'mm); as if an unlisted 375 g at the correction radius 0.8 m were at 30 deg, '
+                'z 0.100 m (or a part there heavier than the layout says)')
+    headline = (f'{verdict} (measured by the load cells); the rotor is not what its layout '
+                f'says: {plane}; the layout expects OK: G 0 at the top speed seen 20 rad/s: '
+                'WITHIN G 40')
+    statuses = diagnostics(node)
+    status, _ = statuses['measured unbalance']
+    assert (status.level, status.message) == (DiagnosticStatus.WARN, measured)
+    status, _ = statuses['rotor balance']
+    assert (status.level, status.message) == (DiagnosticStatus.WARN, headline)
+    assert node.logger.lines == [('warning', f'load cells WARN: {measured}'),
+                                 ('warning', f'balance WARN: {headline}')]
+
+
 def test_a_layout_file_refused_is_said_and_the_one_in_force_kept(node, turned):
     """Say a missing or bad file in the words people read; keep the layout in force."""
     stamps, _ = turned
