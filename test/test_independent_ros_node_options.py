@@ -18,6 +18,7 @@ import json
 import math
 import os
 import struct
+import threading
 import time
 from unittest import mock
 
@@ -39,6 +40,7 @@ from std_msgs.msg import Float64, String
 
 from cvc_balance.ros import balance_monitor
 from cvc_balance.ros.balance_monitor import BalanceMonitor
+from cvc_balance.physics import layout_file
 from cvc_balance.view import rerun_log
 from independent import PinocchioRotor
 
@@ -777,11 +779,59 @@ def test_a_node_that_does_not_record_counts_life_since_start_and_judges_at_its_g
         assert other._layout_error == f'{path}: RuntimeError: no'
         assert other._active.layout.name == 'odd'
     finally:
+        gate = threading.Event()                     # a parse under way: not waited for
+        other._layout_worker.submit(gate.wait, 1.0)
+        started = time.monotonic()
         other.destroy_node()
+        took = time.monotonic() - started
+        gate.set()
+    assert took < 0.5
+
+
+def test_a_layout_file_over_the_limit_is_refused_by_its_size(node, monkeypatch):
+    """
+    Read one byte past the limit, so that the parser can say the file is over it.
+
+    The limit (256 MiB) scaled down to 2000 bytes, in the node and in the parser; the
+    file 2500 bytes of JSON.
+    """
+    monkeypatch.setattr(balance_monitor, 'MAX_TEXT_BYTES', 2000)
+    monkeypatch.setattr(layout_file, 'MAX_TEXT_BYTES', 2000)
+    big = node.folder / 'big.json'
+    big.write_text(json.dumps(DRUM).ljust(2500))
+    node._apply_layout_file(big)
+    assert node._layout_error == (f'{big}: layout text of 2001 bytes is over the limit of '
+                                  '2000 bytes')
+
+
+def test_a_stamp_with_nanoseconds_over_a_second_is_rejected_in_words(node):
+    """Reject a stamp whose nanosec is 10^9 or more, though its time would be on the line."""
+    rejected = node._counts['rejected']
+    node.clock.ns += 2_000_000
+    sec = (node.clock.ns - LINE_NS + 50 * 10**9) // 10**9 - 1
+    msg = JointState(name=['spin'], position=[0.0], velocity=[OMEGA])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, 1_000_000_000
+    node._on_joint_states(serialize_message(msg))
+    assert node._counts['rejected'] == rejected + 1
+    assert node._last_rejection == (f'motion sample: stamp nanosec 1000000000 not below '
+                                    f'10^9 (sec {sec})')
+
+
+class Stream:
+    """The standard output in the test: what is written and when it is flushed."""
+
+    def __init__(self):
+        self.calls = []
+
+    def write(self, text):
+        self.calls.append(('write', text))
+
+    def flush(self):
+        self.calls.append(('flush', ''))
 
 
 def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_view(
-        node, turned, capsys):
+        node, turned):
     """
     Print the counts; close the bag (read back by the mcap library); save; finish rerun.
 
@@ -797,10 +847,13 @@ def test_the_end_says_the_counts_and_finishes_the_recording_the_life_and_the_vie
         cells['/supports/rear/measured_load'](wrench(*divmod(stamp, 10**9), (0.0, -2e3, 0.0)))
     cells['/supports/front/measured_load'](b'\x00\x01\x00\x00' + bytes(8))
     counts = dict(node._counts)
-    capsys.readouterr()
+    stream = Stream()
     node.destroyed = True
-    node.destroy_node()
-    printed = capsys.readouterr().out.splitlines()
+    with mock.patch('sys.stdout', stream):
+        node.destroy_node()
+    printed = ''.join(text for _, text in stream.calls).splitlines()
+    assert stream.calls == [call for line in printed for call in (
+        ('write', line), ('write', '\n'), ('flush', ''))]      # each line flushed at once
     assert printed == [
         'balance_monitor: motion samples: ' + ', '.join(
             f'{counts[name]} {name}' for name in ('accepted', 'rejected', 'dropped')),
