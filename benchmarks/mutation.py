@@ -124,11 +124,13 @@ MODULES = {
     'ros_executor': ('cvc_balance/ros/executor.py', ['test/test_independent_ros_node_parts.py']),
     # The module functions (prepare_layout, recording_label, _text, usage, main's refusals:
     # --mutants '*balance_monitor.x_*') and the node class in process (its callbacks
-    # called directly: test_independent_ros_balance_monitor.py; check its mutants with
-    # mutants_in_process.py, one process; docs/mutation.md).
+    # called directly: test_independent_ros_balance_monitor.py, and with its options on:
+    # test_independent_ros_node_options.py; check its mutants with mutants_in_process.py,
+    # one process; docs/mutation.md).
     'ros_balance_monitor': ('cvc_balance/ros/balance_monitor.py',
                             ['test/test_independent_ros_node_parts.py',
-                             'test/test_independent_ros_balance_monitor.py']),
+                             'test/test_independent_ros_balance_monitor.py',
+                             'test/test_independent_ros_node_options.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
                     'simulate', 'charts')},
