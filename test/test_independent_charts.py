@@ -319,3 +319,7 @@ def test_the_fleet_chart_keeps_its_last_row_inside_its_axes(tmp_path):
     (ax,) = figure.axes
     assert ax.get_ylim() == (2.5, -0.5)         # the last row's words not on the axis' edge
     assert [t.get_position()[1] for t in ax.texts] == [0, 1, 2]
+    # One machine: one row, 8 x (0.28 + 1.4) inches.
+    one = _last_figure(tmp_path / 'one.png', [leaving])
+    assert one.axes[0].get_ylim() == (0.5, -0.5)
+    assert np.allclose(one.get_size_inches(), (8.0, 1.68), rtol=0, atol=1e-12)
