@@ -133,7 +133,11 @@ MODULES = {
                              'test/test_independent_ros_node_options.py']),
     **{f'fleet_{name}': (f'cvc_balance/fleet/{name}.py', FLEET)
        for name in ('discover', 'digest', 'rows', 'store', 'tasks', 'trends', 'engine',
-                    'simulate', 'charts')},
+                    'simulate')},
+    # The charts: what they draw (the figure's objects) and how (reference pictures).
+    'fleet_charts': ('cvc_balance/fleet/charts.py',
+                     ['test/test_chart_pictures.py', 'test/test_independent_charts.py',
+                      'test/test_charts.py']),
 }
 DESELECT = [
     # Tests that start ROS processes or the rerun viewer: slow, and they reach the

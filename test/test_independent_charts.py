@@ -309,3 +309,17 @@ def test_a_machine_without_a_plane_gets_its_chart_saying_so(tmp_path):
     (ax,) = figure.axes
     assert [t.get_text() for t in ax.texts] == ['no correction plane to chart: its runs gave '
                                                 'no plane unbalance']
+
+
+def test_the_fleet_chart_keeps_its_last_row_inside_its_axes(tmp_path):
+    """Rows 0 .. n-1 from the top, each half a row from the edges (a row without a bar too)."""
+    leaving = fit_machine('leaving', series())
+    calm = fit_machine('calm', series(500.0 + NOISE, np.full(len(DAYS), 1200.0)))
+    figure = _last_figure(tmp_path / 'fleet.png', [leaving, calm, calm])
+    (ax,) = figure.axes
+    assert ax.get_ylim() == (2.5, -0.5)         # the last row's words not on the axis' edge
+    assert [t.get_position()[1] for t in ax.texts] == [0, 1, 2]
+    # One machine: one row, 8 x (0.28 + 1.4) inches.
+    one = _last_figure(tmp_path / 'one.png', [leaving])
+    assert one.axes[0].get_ylim() == (0.5, -0.5)
+    assert np.allclose(one.get_size_inches(), (8.0, 1.68), rtol=0, atol=1e-12)

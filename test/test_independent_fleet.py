@@ -663,3 +663,36 @@ def test_a_swap_at_a_runs_very_time_and_tubes_described_otherwise_by_hand():
     del bare['supports']
     spec = _scenario(plan, bare, true, swap, 50.0, 40.0, 20.0, 7, 2.5)
     assert spec['load_cells']['bias'] == {}
+
+
+def test_the_runs_of_machine_i_are_staggered_7_minutes_by_hand(tmp_path, monkeypatch):
+    """
+    Place each run at its day plus its drawn minutes plus 7 minutes a machine, by hand.
+
+    Every draw made the middle of its range (the minutes 45 of [0, 90)), no bag written:
+    six machines of three runs over 10 days start 2026-01-05 08:00 UTC, run k at day 5 k,
+    machine i at 08:45 + 7 i minutes, its file named by that time.
+    """
+    from cvc_balance.fleet import simulate
+
+    class Middle:
+        def uniform(self, low, high):
+            return (low + high) / 2.0
+    monkeypatch.setattr(np.random, 'default_rng', lambda seed: Middle())
+    written = []
+    monkeypatch.setattr(simulate, 'dump_document', lambda spec: '')
+    monkeypatch.setattr(simulate, 'load_scenario', lambda path: None)
+    monkeypatch.setattr(simulate, 'write_bag',
+                        lambda scenario, path, machine_id: written.append((path, machine_id)))
+    plans = simulate_fleet(LAYOUT, tmp_path / 'runs', machines=6, runs=3, days=10.0)
+    when = [[run.when for run in plan.runs] for plan in plans]
+    assert when[0] == [datetime(2026, 1, 5, 8, 45, tzinfo=timezone.utc),
+                       datetime(2026, 1, 10, 8, 45, tzinfo=timezone.utc),
+                       datetime(2026, 1, 15, 8, 45, tzinfo=timezone.utc)]
+    assert when[1][0] == datetime(2026, 1, 5, 8, 52, tzinfo=timezone.utc)
+    assert when[5][2] == datetime(2026, 1, 15, 9, 20, tzinfo=timezone.utc)
+    assert when == [[datetime(2026, 1, 5 + 5 * k, 8, 45, tzinfo=timezone.utc)
+                     + timedelta(minutes=7 * i) for k in range(3)] for i in range(6)]
+    assert [(path.parent.name, path.name) for path, _ in written][-3:] == [
+        ('gantry-0006', '2026-01-05T092000.mcap'), ('gantry-0006', '2026-01-10T092000.mcap'),
+        ('gantry-0006', '2026-01-15T092000')]

@@ -148,7 +148,7 @@ def fleet_chart(trends, path, most=30):
         else:
             ax.text(0, row, f' {trend.status}', va='center', fontsize=7, color=GREY)
     ax.set_yticks(list(rows), labels, fontsize=7)
-    ax.invert_yaxis()
+    ax.set_ylim(max(len(shown), 1) - 0.5, -0.5)     # top down; the last row not on the edge
     ax.set_xlabel('days from the last run to leaving the grade (95 % interval)')
     ax.set_title('machines by urgency', fontsize=10, loc='left')
     ax.grid(axis='x', alpha=0.3)
