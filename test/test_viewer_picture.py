@@ -64,7 +64,7 @@ def pictures(tmp_path_factory):
         for view in viewer.views():
             # The whole picture has settled: a view's own needs two frames alike.
             views[view.name] = (view.view_class, view.reports,
-                                viewer.screenshot(view.view_id, settle=0.0))
+                                viewer.screenshot(view.view_id, settle=0.0, frames=2))
         state = viewer.client.get_state()
     try:       # the viewer's process group (the rerun script and its binary) has gone
         os.killpg(viewer.process.pid, 0)
