@@ -700,6 +700,18 @@ def test_a_period_exactly_on_the_tolerance_of_a_stopping_fits_last_period_is_a_t
         assert (marks.irregular, marks.revolutions) == (0, 4)
 
 
+def test_the_silence_limit_of_a_stopping_fit_is_met_exactly():
+    """The same four marks: (3 + 1/4) x 1.5625 s without a mark still gives an angle."""
+    marks = LiveMarks(tolerance=0.25)
+    for time in (0.0, 1.0, 2.25, 3.8125):
+        marks.mark(time)
+    assert isinstance(marks.motion_at(3.8125 + 3.25 * 1.5625), tuple)
+    assert marks.ready and marks.irregular == 0
+    assert marks.motion_at(3.8125 + 3.25 * 1.5625 + 2.0 ** -10) == \
+        'keyphasor: no mark for 5.08 s (the rotor stopped?)'
+    assert not marks.ready and marks.irregular == 1
+
+
 def test_the_time_of_some_turns_from_a_mark_by_hand():
     # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
