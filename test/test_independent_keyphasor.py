@@ -712,6 +712,26 @@ def test_the_silence_limit_of_a_stopping_fit_is_met_exactly():
     assert not marks.ready and marks.irregular == 1
 
 
+def test_a_coast_down_stops_where_it_stops_and_does_not_turn_back():
+    """
+    Coasting to a stop 10.5 turns on: after mark 10 the rotor turns half a turn and stays.
+
+    The motion by hand: theta(t) = omega t + alpha t^2 / 2 from mark 0 until the stop at
+    -omega / alpha, then theta = 10.5 turns, omega 0 (a tach cannot see it turn back),
+    until the silence limit (3.2 x the last period after mark 10; 3.1 here).
+    """
+    omega, alpha = 20.0, -400.0 / (2.0 * TWO_PI * 10.5)
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(11))) / alpha
+    marks, _ = live_speeds(times)
+    stop, silent = -omega / alpha, times[10] + 3.1 * (times[10] - times[9])
+    for time in np.linspace(times[10], stop, 5).tolist() + [stop + 0.1, stop + 1.0, silent]:
+        angle, speed = marks.motion_at(time)
+        moved = min(time, stop)
+        assert angle == pytest.approx(omega * moved + 0.5 * alpha * moved ** 2 - 10 * TWO_PI,
+                                      abs=1e-9), time
+        assert speed == pytest.approx(omega + alpha * moved, abs=1e-9), time
+
+
 def test_the_time_of_some_turns_from_a_mark_by_hand():
     # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
