@@ -732,6 +732,18 @@ def test_a_coast_down_stops_where_it_stops_and_does_not_turn_back():
         assert speed == pytest.approx(omega + alpha * moved, abs=1e-9), time
 
 
+def test_a_slow_spin_up_is_extrapolated_along_its_fit_after_the_last_mark():
+    """Spin-up at 0.5 rad/s^2 from 10 rad/s: theta and omega by hand up to 3 periods on."""
+    omega, alpha = 10.0, 0.5
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(12))) / alpha
+    marks, _ = live_speeds(times)
+    for time in times[11] + np.array([0.0, 0.3, 1.0, 3.0]) * (times[11] - times[10]):
+        angle, speed = marks.motion_at(time)
+        assert angle == pytest.approx(omega * time + 0.5 * alpha * time ** 2 - 11 * TWO_PI,
+                                      abs=1e-9), time
+        assert speed == pytest.approx(omega + alpha * time, rel=1e-12), time
+
+
 def test_the_time_of_some_turns_from_a_mark_by_hand():
     # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(
