@@ -630,6 +630,120 @@ def test_four_turns_without_a_mark_are_a_gap_and_a_coast_down_keeps_its_last_per
     assert speed[times[10]] == pytest.approx(omega + alpha * times[10], rel=1e-9)
 
 
+def test_marks_missed_at_a_speed_step_are_judged_with_the_tachs_resolution_at_the_last():
+    """
+    Steady at 0.1 s a turn, 2 % faster from mark 12 on; marks 12 and 13 missed.
+
+    Mark 14 ends about three periods: 12 and 13 are put back evenly (at their true times:
+    the speed is constant after the step). Put back, mark 12 leads the fit by -2 % of a
+    turn (beyond CHANGE; the scatter is nil): the fit keeps the two marks before it. Mark 13
+    joins a run of three (no lead judged). Mark 14 leads the quadratic through marks 10-13
+    by 1.4 % (numpy's, below): beyond CHANGE and 4 x the scatter, within 2 x the tach's
+    resolution / period (10 %) with a resolution of 5 ms, so the fit keeps marks 10-14;
+    without a resolution it restarts from marks 12 and 13.
+    """
+    times = stepped_times(0.1, 0.02, 12, count=20)
+    seen = times[:12] + times[14:]
+    marks, speed = live_speeds(seen, resolution=0.005)
+    assert (marks.found, marks.missed, marks.irregular, marks.revolutions) == (18, 2, 0, 19)
+    for k in (12, 13, 14):
+        assert speed[times[k]] == pytest.approx(least_squares_speed(times, 10, k), rel=1e-9), k
+    # The lead of mark 14 on numpy's quadratic through marks 10-13: the time its speed and
+    # acceleration at mark 13 take to turn 2 pi more.
+    a, b, _ = np.polyfit(np.asarray(times[10:14]) - times[13], TWO_PI * np.arange(-3, 1), 2)
+    predicted = min(r.real for r in np.roots([a, b, -TWO_PI]) if r.real > 0.0)
+    lead = (times[14] - times[13]) / predicted - 1.0
+    assert 0.01 < lead < 2.0 * 0.005 / predicted and lead == pytest.approx(0.014, abs=5e-4)
+    _, exact = live_speeds(seen)
+    assert exact[times[14]] == pytest.approx(TWO_PI / 0.098, rel=1e-12)
+    assert exact[times[14]] == pytest.approx(least_squares_speed(times, 12, 14), rel=1e-12)
+
+
+def test_a_coast_down_whose_fit_stops_the_rotor_expects_n_last_periods_for_n_turns():
+    """
+    Coasting to a stop 10.5 turns on, then driven again: a turn each last period P.
+
+    After mark 10 the fit has the rotor stop within half a turn, so n turns are expected
+    to take n P: a mark P, 2 P or 3 P after mark 10 ends 1, 2 or 3 revolutions (0, 1, 2
+    marks missed, put back evenly).
+    """
+    omega, alpha = 20.0, -400.0 / (2.0 * TWO_PI * 10.5)
+    times = list((-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(11))) / alpha)
+    last = times[10] - times[9]
+    for turns in (1, 2, 3):
+        marks = LiveMarks()
+        periods = [p for t in times + [times[10] + turns * last] for p in marks.mark(t) or []]
+        assert (marks.missed, marks.irregular, marks.revolutions) == (turns - 1, 0, 10 + turns)
+        ends = [times[10] + k * last for k in range(turns + 1)]
+        assert [p[:2] for p in periods[-turns:]] == [
+            (pytest.approx(start, rel=1e-12), pytest.approx(end, rel=1e-12))
+            for start, end in zip(ends, ends[1:])]
+
+
+def test_a_period_exactly_on_the_tolerance_of_a_stopping_fits_last_period_is_a_turn():
+    """
+    Periods 1, 1.25, 1.5625 (each 1.25 x the one before: learnt at a tolerance of 1/4).
+
+    numpy's quadratic through the four marks stops before a turn (its discriminant for
+    2 pi is negative), so the next turn is expected to take the last period, 1.5625 s: a
+    period of 1.25 x or 0.75 x it (exact in binary) is within the tolerance, one turn.
+    """
+    learnt = [0.0, 1.0, 2.25, 3.8125]
+    a, b, _ = np.polyfit(np.asarray(learnt) - learnt[-1], TWO_PI * np.arange(-3, 1), 2)
+    assert b * b + 4.0 * a * TWO_PI < 0.0
+    for share in (1.25, 0.75):
+        marks = LiveMarks(tolerance=0.25)
+        for time in learnt:
+            marks.mark(time)
+        (period,) = marks.mark(learnt[-1] + share * 1.5625)
+        assert period[:2] == (3.8125, 3.8125 + share * 1.5625)
+        assert (marks.irregular, marks.revolutions) == (0, 4)
+
+
+def test_the_silence_limit_of_a_stopping_fit_is_met_exactly():
+    """The same four marks: (3 + 1/4) x 1.5625 s without a mark still gives an angle."""
+    marks = LiveMarks(tolerance=0.25)
+    for time in (0.0, 1.0, 2.25, 3.8125):
+        marks.mark(time)
+    assert isinstance(marks.motion_at(3.8125 + 3.25 * 1.5625), tuple)
+    assert marks.ready and marks.irregular == 0
+    assert marks.motion_at(3.8125 + 3.25 * 1.5625 + 2.0 ** -10) == \
+        'keyphasor: no mark for 5.08 s (the rotor stopped?)'
+    assert not marks.ready and marks.irregular == 1
+
+
+def test_a_coast_down_stops_where_it_stops_and_does_not_turn_back():
+    """
+    Coasting to a stop 10.5 turns on: after mark 10 the rotor turns half a turn and stays.
+
+    The motion by hand: theta(t) = omega t + alpha t^2 / 2 from mark 0 until the stop at
+    -omega / alpha, then theta = 10.5 turns, omega 0 (a tach cannot see it turn back),
+    until the silence limit (3.2 x the last period after mark 10; 3.1 here).
+    """
+    omega, alpha = 20.0, -400.0 / (2.0 * TWO_PI * 10.5)
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(11))) / alpha
+    marks, _ = live_speeds(times)
+    stop, silent = -omega / alpha, times[10] + 3.1 * (times[10] - times[9])
+    for time in np.linspace(times[10], stop, 5).tolist() + [stop + 0.1, stop + 1.0, silent]:
+        angle, speed = marks.motion_at(time)
+        moved = min(time, stop)
+        assert angle == pytest.approx(omega * moved + 0.5 * alpha * moved ** 2 - 10 * TWO_PI,
+                                      abs=1e-9), time
+        assert speed == pytest.approx(omega + alpha * moved, abs=1e-9), time
+
+
+def test_a_slow_spin_up_is_extrapolated_along_its_fit_after_the_last_mark():
+    """Spin-up at 0.5 rad/s^2 from 10 rad/s: theta and omega by hand up to 3 periods on."""
+    omega, alpha = 10.0, 0.5
+    times = (-omega + np.sqrt(omega ** 2 + 2.0 * alpha * TWO_PI * np.arange(12))) / alpha
+    marks, _ = live_speeds(times)
+    for time in times[11] + np.array([0.0, 0.3, 1.0, 3.0]) * (times[11] - times[10]):
+        angle, speed = marks.motion_at(time)
+        assert angle == pytest.approx(omega * time + 0.5 * alpha * time ** 2 - 11 * TWO_PI,
+                                      abs=1e-9), time
+        assert speed == pytest.approx(omega + alpha * time, rel=1e-12), time
+
+
 def test_the_time_of_some_turns_from_a_mark_by_hand():
     # 2 pi t + 2 t^2 / 2 = 2 pi: t = (-2 pi + sqrt(4 pi^2 + 8 pi)) / 2.
     assert _turn_time(TWO_PI, 2.0, 1, None) == pytest.approx(

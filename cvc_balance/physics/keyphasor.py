@@ -677,8 +677,9 @@ class LiveMarks:
         """
         Return (angle rad since the newest good mark, omega rad/s), or a reason there is none.
 
-        Extrapolated along the constant-acceleration fit at the newest mark; a reason (str)
-        while the period is being learnt, or when no mark came for longer than
+        Extrapolated along the constant-acceleration fit at the newest mark, until the fit
+        has the rotor stop (then the angle stays, omega 0: a tach sees no turning back); a
+        reason (str) while the period is being learnt, or when no mark came for longer than
         ``MAX_MISSED + 1`` periods (then the marks start again).
         """
         if not self.ready:
@@ -690,6 +691,8 @@ class LiveMarks:
             self.irregular += 1
             self._restart()
             return f'keyphasor: no mark for {elapsed:.3g} s (the rotor stopped?)'
+        if acceleration < 0.0 < speed:
+            elapsed = min(elapsed, -speed / acceleration)
         return (self._offset + speed * elapsed + 0.5 * acceleration * elapsed * elapsed,
                 speed + acceleration * elapsed)
 
