@@ -37,14 +37,21 @@ COSTS = _file_costs()
 
 def pytest_collection_modifyitems(config, items):
     """
-    Order the files longest first; mark tests slow and alone by their lists.
+    Order the files longest first, those with a test that runs alone last; mark tests
+    slow and alone by their lists.
 
     Longest first: with ``./dev.sh test``'s workers (``--no-loadscope-reorder``: files
     in this order) the long files start early and the workers end together. A file not
     in file_costs.txt comes after those listed; a file's own tests keep their order.
+    Files with a test marked alone come at the very end, when the other workers have no
+    file left to start: earlier, a test waiting for the lock alone waited while they took
+    test after test (a lock shared is granted beside a waiting exclusive one), 60-137 s
+    each, and the files queued behind it on its worker waited with it.
     Then each test named in slow_tests.txt is marked slow, in alone_tests.txt alone.
     """
-    items.sort(key=lambda item: -COSTS.get(f'{item.path.parent.name}/{item.path.name}', 0.0))
+    alone_files = {entry.split('::')[0] for entry in ALONE}
+    items.sort(key=lambda item: (f'{item.path.parent.name}/{item.path.name}' in alone_files,
+                                 -COSTS.get(f'{item.path.parent.name}/{item.path.name}', 0.0)))
     for item in items:
         file = f'{item.path.parent.name}/{item.path.name}'
         for listed, mark in ((SLOW, pytest.mark.slow), (ALONE, pytest.mark.alone)):
