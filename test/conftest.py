@@ -47,16 +47,18 @@ def pytest_collection_modifyitems(config, items):
     file left to start: earlier, a test waiting for the lock alone waited while they took
     test after test (a lock shared is granted beside a waiting exclusive one), 60-137 s
     each, and the files queued behind it on its worker waited with it.
-    Then each test named in slow_tests.txt is marked slow, in alone_tests.txt alone.
+    Each test named in slow_tests.txt is marked slow, in alone_tests.txt alone (a test
+    may also be marked alone where it is written).
     """
-    alone_files = {entry.split('::')[0] for entry in ALONE}
-    items.sort(key=lambda item: (f'{item.path.parent.name}/{item.path.name}' in alone_files,
-                                 -COSTS.get(f'{item.path.parent.name}/{item.path.name}', 0.0)))
+    def file_of(item):
+        return f'{item.path.parent.name}/{item.path.name}'
     for item in items:
-        file = f'{item.path.parent.name}/{item.path.name}'
+        file = file_of(item)
         for listed, mark in ((SLOW, pytest.mark.slow), (ALONE, pytest.mark.alone)):
             if file in listed or f'{file}::{item.originalname}' in listed:
                 item.add_marker(mark)
+    alone_files = {file_of(item) for item in items if item.get_closest_marker('alone')}
+    items.sort(key=lambda item: (file_of(item) in alone_files, -COSTS.get(file_of(item), 0.0)))
 
 
 @pytest.fixture(autouse=True)
