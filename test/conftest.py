@@ -37,8 +37,7 @@ COSTS = _file_costs()
 
 def pytest_collection_modifyitems(config, items):
     """
-    Order the files longest first, those with a test that runs alone last; mark tests
-    slow and alone by their lists.
+    Mark tests slow and alone by their lists; order the files longest first, alone last.
 
     Longest first: with ``./dev.sh test``'s workers (``--no-loadscope-reorder``: files
     in this order) the long files start early and the workers end together. A file not
