@@ -311,11 +311,17 @@ def test_missed_and_doubled_marks_are_counted_by_the_node_as_by_replay(runs, tmp
 
 # -- play into the node's own process ---------------------------------------------------
 
-@pytest.mark.parametrize('kind', [
-    'time_reference',
-    # Stamped on receipt: a node descheduled by another test sees its marks late.
-    pytest.param('float64', marks=pytest.mark.alone)])
-def test_play_a_tach_bag_into_the_node(runs, kind, tmp_path):
+def test_play_a_time_reference_tach_bag_into_the_node(runs, tmp_path):
+    play_into_the_node(runs, 'time_reference', tmp_path)
+
+
+def play_into_the_node(runs, kind, tmp_path):
+    """
+    Play the run's bag with a ``kind`` tach into the node's own process; check what it did.
+
+    The sampled tach's (float64) is in test/test_node_timing.py: stamped on receipt, its
+    marks come late to a node descheduled by another test, so it runs alone.
+    """
     run, layout, bags, offline = runs
     node = NodeProcess('cvc_balance.ros.balance_monitor',
                        ['-p', f'layout_file:={layout}', '-p', 'keyphasor_topic:=keyphasor',
