@@ -342,6 +342,10 @@ class BagWriter:
         """
         self._flush_pending()
         count = block.n if count is None else count
+        if count == 0:
+            # Nothing to write, nor to fill: a fill left running on a worker raced the next
+            # block's fill of the same buffer (seen: a sample with the values before).
+            return
         log_time = np.array(log_time[:count], dtype=np.uint64)   # kept until written
         buffer = block.buffer()
         data = buffer.bytes.data
