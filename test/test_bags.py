@@ -127,17 +127,37 @@ def test_bundled_bags_decode_equal_to_a_fresh_simulation(scenario_file, tmp_path
     assert [name for name, _ in bundled['metadata']] == ['rosbag2', 'rosbag2']
 
 
+@pytest.fixture(scope='module')
+def replayed(tmp_path_factory):
+    """
+    Return a function of a scenario file: its bundled bag replayed once in this module.
+
+    It returns (replay's summary, the output bag, rosbags' read of it {topic: [(log time,
+    message)]}); two tests read the same outputs, and a bundled bag is what its scenario
+    makes today (test_bundled_bags_decode_equal_to_a_fresh_simulation).
+    """
+    folder, done = tmp_path_factory.mktemp('replayed'), {}
+
+    def get(scenario_file):
+        if scenario_file not in done:
+            out = folder / f'{scenario_file.stem}.mcap'
+            summary = replay(scenario_file.with_suffix('.mcap'), out)
+            done[scenario_file] = (summary, out, read_with_rosbags(out))
+        return done[scenario_file]
+    return get
+
+
 @pytest.mark.parametrize('scenario_file', BUNDLED, ids=lambda p: p.stem)
-def test_project_bags_read_with_rosbags_and_mcap_ros2(scenario_file, tmp_path):
+def test_project_bags_read_with_rosbags_and_mcap_ros2(scenario_file, tmp_path, replayed):
     """Simulated input and replayed output bags: every message, decoded fields agree."""
     scenario = load_scenario(scenario_file)
     inputs = tmp_path / 'in.mcap'
     write_bag(scenario, inputs)
-    outputs = tmp_path / 'out.mcap'
-    replay(inputs, outputs)
+    _, outputs, outputs_by_rosbags = replayed(scenario_file)
     angle, omega = scenario.measured()
     for path in (inputs, outputs):
-        by_rosbags, by_mcap = read_with_rosbags(path), read_with_mcap_ros2(path)
+        by_rosbags = outputs_by_rosbags if path == outputs else read_with_rosbags(path)
+        by_mcap = read_with_mcap_ros2(path)
         assert by_rosbags.keys() == by_mcap.keys()
         for topic in by_rosbags:
             assert len(by_rosbags[topic]) == len(by_mcap[topic]), topic
@@ -166,15 +186,12 @@ def test_project_bags_read_with_rosbags_and_mcap_ros2(scenario_file, tmp_path):
 
 
 @pytest.mark.parametrize('scenario_file', BUNDLED, ids=lambda p: p.stem)
-def test_offline_replay_matches_pinocchio_sample_by_sample(scenario_file, tmp_path):
+def test_offline_replay_matches_pinocchio_sample_by_sample(scenario_file, replayed):
     """Outputs read back by rosbags against Pinocchio with the live alpha estimator."""
-    bag = scenario_file.with_suffix('.mcap')
-    out = tmp_path / 'out.mcap'
-    summary = replay(bag, out)
+    summary, _, got = replayed(scenario_file)
     expected, _ = expected_outputs(scenario_file)
     stamps = load_scenario(scenario_file).stamps_ns()
     assert summary.accepted == len(stamps) and summary.rejected == 0
-    got = read_with_rosbags(out)
     for topic in [t for t in got if t not in ('/layout', '/joint_states')]:
         values = np.array([wrench(m) for _, m in got[topic]])
         reference = np.array([expected[stamp_ns(m)][topic] for _, m in got[topic]])
