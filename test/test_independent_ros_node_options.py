@@ -43,6 +43,8 @@ from cvc_balance.ros.balance_monitor import BalanceMonitor
 from cvc_balance.physics import layout_file
 from cvc_balance.view import rerun_log
 from independent import PinocchioRotor
+from test_independent_ros_balance_monitor import Clock, Logger
+from test_independent_ros_load_cells import wrench
 
 G = 9.80665
 DRUM = {'name': 'balanced drum', 'gravity': [0.0, -G, 0.0],
@@ -57,32 +59,6 @@ DRUM = {'name': 'balanced drum', 'gravity': [0.0, -G, 0.0],
 MISSED = {'name': 'missed', 'mass': 0.5, 'radius': 0.6, 'angle_deg': 30.0, 'z': 0.1}
 OMEGA, RATE = 20.0, 500.0
 LINE_NS = 900 * 10**9           # the stamps' line: 900 s behind the receive clock
-
-
-class Clock:
-    """The node's monotonic clock, set by the test (whole nanoseconds)."""
-
-    def __init__(self):
-        self.ns = 1000 * 10**9
-
-    def __call__(self):
-        return self.ns / 1e9
-
-
-class Logger:
-    """The node's logger in the test: (severity, text) of each line."""
-
-    def __init__(self):
-        self.lines = []
-
-    def info(self, text):
-        self.lines.append(('info', text))
-
-    def warning(self, text):
-        self.lines.append(('warning', text))
-
-    def error(self, text):
-        self.lines.append(('error', text))
 
 
 class Rerun:
@@ -149,16 +125,6 @@ def node(tmp_path_factory):
             except Exception:       # a mutant's broken state (mutants_in_process): go on
                 Node.destroy_node(monitor)
     rclpy.try_shutdown(context=context)
-
-
-def wrench(sec, nanosec, force, torque=(0.0, 0.0, 0.0)):
-    message = WrenchStamped()
-    message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
-    message.header.frame_id = 'cell'
-    (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z) = map(float, force)
-    (message.wrench.torque.x, message.wrench.torque.y,
-     message.wrench.torque.z) = map(float, torque)
-    return serialize_message(message)
 
 
 def joint_states(stamp_ns, angle, omega):
